@@ -1,0 +1,1 @@
+"""Recursive-feedback coupling algorithms (sans-IO: they use only cosim.handles.SubsimHandle)."""

@@ -1,0 +1,77 @@
+"""Run a subsim model as its own process: ``python -m subsims.<name> --connect EP --run RUN``.
+
+Exit codes: 0 after ``shutdown``, SIGTERM, SIGINT or loss of the coordinator; 2 when the
+coordinator cannot be reached in time or the arguments are bad. Every path closes the Zenoh
+session (an open session keeps the process alive forever).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import signal
+import sys
+from collections.abc import Sequence
+
+import zenoh
+
+from cosim.protocol.bus import check_name, client_config
+from cosim.protocol.server import CommandServer
+from cosim.runtime import DEFAULT_HISTORY, Runtime
+from cosim.subsim import Subsim
+
+
+class _Stop(BaseException):
+    """Raised in the main thread by SIGTERM/SIGINT (delivered while ``recv`` waits)."""
+
+
+def _raise_stop(signum: int, frame: object) -> None:
+    raise _Stop(signal.Signals(signum).name)
+
+
+def parse_args(model_cls: type[Subsim], argv: Sequence[str] | None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(
+        prog=f"python -m {model_cls.__module__.rsplit('.', 1)[0]}",
+        description=f"Serve the {model_cls.__name__} subsim over Zenoh.",
+    )
+    p.add_argument("--connect", required=True, help="coordinator endpoint, e.g. tcp/127.0.0.1:7447")
+    p.add_argument("--run", required=True, help="run id (namespaces every key)")
+    p.add_argument("--name", default=model_cls.name, help=f"instance name on the bus (default: {model_cls.name})")
+    p.add_argument("--connect-timeout", type=float, default=10.0, help="seconds to wait for the coordinator")
+    p.add_argument("--history", type=int, default=DEFAULT_HISTORY, help="committed states kept for rollback")
+    args = p.parse_args(argv)
+    try:
+        check_name(args.run, "--run")
+        check_name(args.name, "--name")
+    except ValueError as exc:
+        p.error(str(exc))
+    return args
+
+
+def main(model_cls: type[Subsim], argv: Sequence[str] | None = None) -> int:
+    args = parse_args(model_cls, argv)
+    runtime = Runtime(model_cls(), name=args.name, history_limit=args.history)
+    signal.signal(signal.SIGTERM, _raise_stop)
+    signal.signal(signal.SIGINT, _raise_stop)
+    try:
+        session = zenoh.open(client_config(args.connect, args.connect_timeout))
+    except (zenoh.ZError, _Stop) as exc:
+        print(
+            f"{args.name}: cannot reach the coordinator at {args.connect} within {args.connect_timeout:g} s ({exc})",
+            file=sys.stderr,
+        )
+        return 2
+    try:
+        server = CommandServer(
+            session, args.run, runtime, on_coordinator_lost=lambda: os.kill(os.getpid(), signal.SIGTERM)
+        )
+        print(f"{args.name}: serving run {args.run} via {args.connect} (pid {os.getpid()})", file=sys.stderr, flush=True)
+        try:
+            server.serve()
+        except _Stop as why:
+            print(f"{args.name}: stopping on {why}", file=sys.stderr)
+        finally:
+            server.close()
+    finally:
+        session.close()
+    return 0

@@ -1,0 +1,96 @@
+"""Zenoh plumbing: key expressions, session configuration, and the coordinator's router.
+
+Topology: the coordinator's session is a ``router`` listening on an endpoint; every subsim is a
+``client`` connected to it. Multicast scouting is always off (runs and tests never find each
+other); shared memory is off (small payloads, and SHM-promoted queries can be dropped under
+load, eclipse-zenoh/zenoh#2628).
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import uuid
+from typing import Any
+
+import zenoh
+
+KEY_ROOT = "cosim"
+_NAME = re.compile(r"^[A-Za-z0-9_.\-]{1,64}$")
+
+
+def check_name(value: str, what: str) -> str:
+    """Run ids and subsim names become key-expression chunks: no '/', '*', '$', '?', '#', spaces."""
+    if not isinstance(value, str) or not _NAME.match(value):
+        raise ValueError(f"{what} {value!r} must be 1-64 characters of letters, digits, '_', '-' or '.'")
+    return value
+
+
+def new_run_id() -> str:
+    return "run-" + uuid.uuid4().hex[:12]
+
+
+def rpc_key(run: str, subsim: str) -> str:
+    return f"{KEY_ROOT}/{run}/{subsim}/rpc"
+
+
+def alive_key(run: str, subsim: str) -> str:
+    return f"{KEY_ROOT}/{run}/{subsim}/alive"
+
+
+def coordinator_alive_key(run: str) -> str:
+    return f"{KEY_ROOT}/{run}/@coordinator/alive"
+
+
+def make_config(
+    mode: str,
+    listen: list[str] | tuple[str, ...] = (),
+    connect: list[str] | tuple[str, ...] = (),
+    extra: dict[str, Any] | None = None,
+) -> zenoh.Config:
+    conf = zenoh.Config()
+    settings: dict[str, Any] = {
+        "mode": mode,
+        "scouting/multicast/enabled": False,
+        "scouting/delay": 0,
+        "listen/endpoints": list(listen),
+        "connect/endpoints": list(connect),
+        "transport/shared_memory/enabled": False,
+    }
+    settings.update(extra or {})
+    for key, value in settings.items():
+        conf.insert_json5(key, json.dumps(value))
+    return conf
+
+
+def client_config(endpoint: str, connect_timeout_s: float, lease_ms: int = 3000) -> zenoh.Config:
+    return make_config(
+        "client",
+        connect=[endpoint],
+        extra={"connect/timeout_ms": int(connect_timeout_s * 1000), "transport/link/tx/lease": lease_ms},
+    )
+
+
+def open_router(listen: str = "tcp/127.0.0.1:0") -> tuple[zenoh.Session, str]:
+    """Open the coordinator's router session; return it with the endpoint clients should connect to."""
+    session = zenoh.open(make_config("router", listen=[listen], extra={"adminspace/enabled": True}))
+    try:
+        endpoint = _bound_endpoint(session, listen)
+    except Exception:
+        session.close()
+        raise
+    return session, endpoint
+
+
+def _bound_endpoint(session: zenoh.Session, listen: str) -> str:
+    """Read the actual locator (port 0 becomes a real port) from the admin space."""
+    for reply in session.get(f"@/{session.zid()}/*", timeout=2.0):
+        if reply.ok is not None and str(reply.ok.key_expr).rsplit("/", 1)[-1] in ("router", "peer"):
+            locators = json.loads(reply.ok.payload.to_bytes())["locators"]
+            proto = listen.split("/", 1)[0]
+            for loc in locators:
+                if loc.startswith(proto + "/"):
+                    return loc
+            if locators:
+                return locators[0]
+    raise RuntimeError(f"could not read the bound locator of the router listening on {listen}")

@@ -1,0 +1,49 @@
+"""Error codes shared by both ends of the protocol (documented in docs/protocol.md)."""
+
+from __future__ import annotations
+
+# code -> meaning
+ERROR_CODES: dict[str, str] = {
+    "decode": "payload is not a msgpack map, or not valid msgpack",
+    "version": "protocol version missing or not supported",
+    "unknown_command": "command name not known",
+    "bad_request": "a field is missing, unknown, of the wrong type, or an array is malformed",
+    "bad_value": "a field is well formed but out of contract (wrong size, NaN/inf, bad parameter)",
+    "not_configured": "the subsim must be configured first",
+    "time_mismatch": "the request's start time is not the committed time",
+    "no_trial": "commit without a run_interval since the last commit/rollback/set_state",
+    "stale_trial": "the latest trial did not start from the current committed state",
+    "not_in_history": "rollback target time is not in the committed history",
+    "model_error": "the model could not advance (e.g. a singularity); nothing committed changed",
+    "internal": "unexpected failure inside the subsim; nothing committed changed",
+    "timeout": "no reply within the caller's timeout (raised coordinator-side)",
+    "no_responder": "nobody serves this subsim's key, or the process died mid-request (coordinator-side)",
+}
+
+
+class CosimError(Exception):
+    """An error with a protocol code; the runtime turns it into an error reply."""
+
+    def __init__(self, code: str, message: str) -> None:
+        super().__init__(message)
+        self.code = code
+        self.message = message
+
+
+class ProtocolError(CosimError):
+    """A message could not be decoded or does not match its schema."""
+
+
+class SubsimError(RuntimeError):
+    """Coordinator side: a command failed. Names the subsim, the command and the cause."""
+
+    def __init__(self, code: str, message: str, subsim: str, command: str) -> None:
+        super().__init__(f"{subsim}.{command}: [{code}] {message}")
+        self.code = code
+        self.message = message
+        self.subsim = subsim
+        self.command = command
+
+
+class SubsimDied(SubsimError):
+    """The subsim process went away (liveliness lost or no responder)."""

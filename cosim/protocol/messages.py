@@ -1,0 +1,182 @@
+"""Request and reply messages: schemas, encoding and total (never-raising) decoding.
+
+Request:  ``{"v": 1, "cmd": <command>, "args": {...}}``
+Reply:    ``{"v": 1, "ok": true, "result": {...}}`` or
+          ``{"v": 1, "ok": false, "error": {"code", "message", "subsim", "command"}}``
+
+Requests are strict (unknown fields are errors); replies ignore unknown fields so a subsim may
+report more than this version knows. See docs/protocol.md.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from cosim.protocol.errors import ProtocolError
+from cosim.protocol.wire import (
+    Fields,
+    check_fields,
+    encode_array,
+    pack,
+    t_any_map,
+    t_array,
+    t_array_map,
+    t_bool,
+    t_float,
+    t_int,
+    t_opt,
+    t_params,
+    t_port_map,
+    t_str,
+    unpack_map,
+)
+
+PROTOCOL_VERSION = 1
+
+DESCRIPTION_FIELDS: Fields = {
+    "name": (t_str, True),
+    "model": (t_str, True),
+    "inputs": (t_port_map, True),
+    "outputs": (t_port_map, True),
+    "algebraic": (t_bool, True),
+    "configured": (t_bool, True),
+    "time": (t_opt(t_float), False),
+    "history_limit": (t_int, True),
+    "protocol": (t_int, True),
+}
+
+REQUESTS: dict[str, Fields] = {
+    "describe": {},
+    "configure": {"params": (t_params, True), "t0": (t_float, False)},
+    "run_interval": {"t": (t_array, True), "inputs": (t_array_map, True), "interp": (t_str, False)},
+    "commit": {},
+    "rollback": {"to_time": (t_float, False)},
+    "get_state": {},
+    "set_state": {"time": (t_float, True), "state": (t_array, True)},
+    "status": {},
+    "shutdown": {},
+}
+
+RESULTS: dict[str, Fields] = {
+    "describe": DESCRIPTION_FIELDS,
+    "configure": DESCRIPTION_FIELDS,
+    "run_interval": {"t": (t_array, True), "outputs": (t_array_map, True), "end_time": (t_float, True)},
+    "commit": {"time": (t_float, True)},
+    "rollback": {"time": (t_float, True)},
+    "get_state": {"time": (t_float, True), "state": (t_array, True), "model": (t_str, True)},
+    "set_state": {"time": (t_float, True)},
+    "status": {
+        "name": (t_str, True),
+        "configured": (t_bool, True),
+        "time": (t_opt(t_float), False),
+        "has_trial": (t_bool, True),
+        "history": (t_int, True),
+        "requests": (t_int, True),
+        "pid": (t_int, False),
+    },
+    "shutdown": {},
+}
+
+ERROR_FIELDS: Fields = {
+    "code": (t_str, True),
+    "message": (t_str, True),
+    "subsim": (t_str, True),
+    "command": (t_str, True),
+}
+
+
+@dataclass(frozen=True)
+class Request:
+    cmd: str
+    args: dict[str, Any]
+
+
+@dataclass(frozen=True)
+class ErrorInfo:
+    code: str
+    message: str
+    subsim: str
+    command: str
+
+
+def _to_wire(value: Any) -> Any:
+    """Arrays become array maps, recursively through maps and lists."""
+    if isinstance(value, np.ndarray):
+        return encode_array(value)
+    if isinstance(value, dict):
+        return {k: _to_wire(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_to_wire(v) for v in value]
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+def _check_version(msg: dict) -> None:
+    v = msg.get("v")
+    if isinstance(v, bool) or not isinstance(v, int):
+        raise ProtocolError("version", f"field 'v' must be the protocol version integer, got {v!r}"[:120])
+    if v != PROTOCOL_VERSION:
+        raise ProtocolError("version", f"protocol version {v} not supported (this end speaks {PROTOCOL_VERSION})")
+
+
+def encode_request(cmd: str, args: dict[str, Any] | None = None) -> bytes:
+    return pack({"v": PROTOCOL_VERSION, "cmd": cmd, "args": _to_wire(args or {})})
+
+
+def decode_request(payload: bytes) -> Request:
+    """Decode and validate a request. Raises only ``ProtocolError``."""
+    try:
+        msg = unpack_map(payload)
+        _check_version(msg)
+        cmd = msg.get("cmd")
+        if not isinstance(cmd, str):
+            raise ProtocolError("bad_request", f"field 'cmd' must be a string, got {type(cmd).__name__}")
+        if cmd not in REQUESTS:
+            raise ProtocolError("unknown_command", f"unknown command {cmd[:40]!r}; known: {', '.join(REQUESTS)}")
+        extra = set(msg) - {"v", "cmd", "args"}
+        if extra:
+            raise ProtocolError("bad_request", f"unknown envelope field(s) {sorted(map(str, extra))}")
+        args = check_fields(msg.get("args", {}), REQUESTS[cmd], "args")
+        return Request(cmd, args)
+    except ProtocolError:
+        raise
+    except Exception as exc:  # a checker bug must still not escape as anything but a protocol error
+        raise ProtocolError("bad_request", f"undecodable request ({type(exc).__name__})") from None
+
+
+def request_command(payload: bytes) -> str:
+    """Best-effort command name of a payload, for error replies to requests that failed to decode."""
+    try:
+        cmd = unpack_map(payload).get("cmd")
+        return cmd if isinstance(cmd, str) else "?"
+    except Exception:
+        return "?"
+
+
+def encode_result(result: dict[str, Any]) -> bytes:
+    return pack({"v": PROTOCOL_VERSION, "ok": True, "result": _to_wire(result)})
+
+
+def encode_error(code: str, message: str, subsim: str, command: str) -> bytes:
+    err = {"code": code, "message": message, "subsim": subsim, "command": command}
+    return pack({"v": PROTOCOL_VERSION, "ok": False, "error": err})
+
+
+def decode_reply(cmd: str, payload: bytes) -> dict[str, Any] | ErrorInfo:
+    """Decode a reply to ``cmd``: the checked result map, or the error it carries."""
+    try:
+        msg = unpack_map(payload)
+        _check_version(msg)
+        ok = t_bool(msg.get("ok"), "ok")
+        if not ok:
+            e = check_fields(msg.get("error"), ERROR_FIELDS, "error", strict=False)
+            return ErrorInfo(e["code"], e["message"], e["subsim"], e["command"])
+        return check_fields(t_any_map(msg.get("result"), "result"), RESULTS[cmd], "result", strict=False)
+    except ProtocolError:
+        raise
+    except Exception as exc:
+        raise ProtocolError("bad_request", f"undecodable reply ({type(exc).__name__})") from None

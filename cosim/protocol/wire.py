@@ -1,0 +1,176 @@
+"""Field types of the wire format: msgpack values checked and converted, never trusted.
+
+Every checker takes ``(value, path)`` and returns the converted value or raises
+``ProtocolError`` naming ``path`` (e.g. ``args.inputs.R``) and what was expected.
+Arrays travel as ``{"shape": [int, ...], "data": <bin: little-endian float64>}``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import Any
+
+import msgpack
+import numpy as np
+
+from cosim.protocol.errors import ProtocolError
+
+Checker = Callable[[Any, str], Any]
+
+MAX_NDIM = 4
+MAX_NESTING = 32
+_F8 = np.dtype("<f8")
+
+
+def bad(path: str, expected: str, value: Any) -> ProtocolError:
+    shown = type(value).__name__ if not isinstance(value, (int, float, str, bool)) else repr(value)[:60]
+    return ProtocolError("bad_request", f"{path}: expected {expected}, got {shown}")
+
+
+def pack(obj: Any) -> bytes:
+    return msgpack.packb(obj, use_bin_type=True)
+
+
+def unpack_map(payload: bytes) -> dict:
+    """Decode a msgpack payload that must be a map; any failure is a ``decode`` error."""
+    try:
+        obj = msgpack.unpackb(payload, raw=False, strict_map_key=True)
+    except Exception as exc:  # msgpack raises several unrelated types on garbage
+        raise ProtocolError("decode", f"payload is not valid msgpack ({type(exc).__name__}: {exc})"[:200]) from None
+    if not isinstance(obj, dict):
+        raise ProtocolError("decode", f"payload must be a msgpack map, got {type(obj).__name__}")
+    return obj
+
+
+def encode_array(a: np.ndarray) -> dict:
+    arr = np.ascontiguousarray(a, dtype=_F8)
+    return {"shape": list(arr.shape), "data": arr.tobytes()}
+
+
+# --- checkers -------------------------------------------------------------------------------
+
+
+def t_bool(v: Any, path: str) -> bool:
+    if not isinstance(v, bool):
+        raise bad(path, "a boolean", v)
+    return v
+
+
+def t_int(v: Any, path: str) -> int:
+    if isinstance(v, bool) or not isinstance(v, int):
+        raise bad(path, "an integer", v)
+    return v
+
+
+def t_str(v: Any, path: str) -> str:
+    if not isinstance(v, str):
+        raise bad(path, "a string", v)
+    return v
+
+
+def t_float(v: Any, path: str) -> float:
+    """A finite number (integers accepted)."""
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise bad(path, "a number", v)
+    try:
+        f = float(v)
+    except OverflowError:
+        raise ProtocolError("bad_value", f"{path}: number out of float range") from None
+    if not math.isfinite(f):
+        raise ProtocolError("bad_value", f"{path}: must be finite, got {f!r}")
+    return f
+
+
+def t_opt(inner: Checker) -> Checker:
+    def check(v: Any, path: str) -> Any:
+        return None if v is None else inner(v, path)
+
+    return check
+
+
+def t_array(v: Any, path: str) -> np.ndarray:
+    """An encoded float64 array (finite values are the runtime's business, not the codec's)."""
+    if not isinstance(v, dict) or set(v) != {"shape", "data"}:
+        raise bad(path, 'an array map {"shape": [...], "data": <bin>}', v)
+    shape, data = v["shape"], v["data"]
+    if not isinstance(shape, list) or not 1 <= len(shape) <= MAX_NDIM:
+        raise bad(f"{path}.shape", f"a list of 1..{MAX_NDIM} non-negative integers", shape)
+    for d in shape:
+        if isinstance(d, bool) or not isinstance(d, int) or d < 0:
+            raise bad(f"{path}.shape", "non-negative integers", d)
+    if not isinstance(data, bytes):
+        raise bad(f"{path}.data", "binary data", data)
+    count = math.prod(shape)
+    if count * 8 != len(data):
+        raise ProtocolError(
+            "bad_request", f"{path}: shape {shape} needs {count * 8} bytes of float64, data has {len(data)}"
+        )
+    return np.frombuffer(data, dtype=_F8).reshape(shape)
+
+
+def t_array_map(v: Any, path: str) -> dict[str, np.ndarray]:
+    if not isinstance(v, dict):
+        raise bad(path, "a map of name -> array", v)
+    return {t_str(k, f"{path} key"): t_array(a, f"{path}.{k}") for k, a in v.items()}
+
+
+def t_port_map(v: Any, path: str) -> dict[str, dict]:
+    if not isinstance(v, dict):
+        raise bad(path, "a map of port name -> {size, unit, doc}", v)
+    out = {}
+    for k, p in v.items():
+        name = t_str(k, f"{path} key")
+        out[name] = check_fields(p, PORT_FIELDS, f"{path}.{name}", strict=False)
+        if out[name]["size"] < 1:
+            raise ProtocolError("bad_request", f"{path}.{name}.size: must be >= 1")
+    return out
+
+
+def t_value(v: Any, path: str, depth: int = 0) -> Any:
+    """A parameter value: nil, bool, int, float, str, list or string-keyed map, nested <= 32 deep."""
+    if depth > MAX_NESTING:
+        raise ProtocolError("bad_request", f"{path}: nested deeper than {MAX_NESTING}")
+    if v is None or isinstance(v, (bool, int, float, str)):
+        return v
+    if isinstance(v, list):
+        return [t_value(x, f"{path}[{i}]", depth + 1) for i, x in enumerate(v)]
+    if isinstance(v, dict):
+        return {t_str(k, f"{path} key"): t_value(x, f"{path}.{k}", depth + 1) for k, x in v.items()}
+    raise bad(path, "nil, bool, number, string, list or map", v)
+
+
+def t_params(v: Any, path: str) -> dict:
+    if not isinstance(v, dict):
+        raise bad(path, "a map of parameters", v)
+    return t_value(v, path)
+
+
+def t_any_map(v: Any, path: str) -> dict:
+    if not isinstance(v, dict):
+        raise bad(path, "a map", v)
+    return v
+
+
+Fields = dict[str, tuple[Checker, bool]]  # name -> (checker, required)
+
+PORT_FIELDS: Fields = {"size": (t_int, True), "unit": (t_str, False), "doc": (t_str, False)}
+
+
+def check_fields(obj: Any, fields: Fields, path: str, strict: bool = True) -> dict:
+    """Check a map against ``fields``; unknown keys are errors when ``strict``, else dropped."""
+    if not isinstance(obj, dict):
+        raise bad(path, "a map", obj)
+    if strict:
+        unknown = [k for k in obj if k not in fields]
+        if unknown:
+            raise ProtocolError(
+                "bad_request", f"{path}: unknown field(s) {', '.join(map(repr, unknown))}; known: {', '.join(fields)}"
+            )
+    out = {}
+    for name, (check, required) in fields.items():
+        if name in obj:
+            out[name] = check(obj[name], f"{path}.{name}")
+        elif required:
+            raise ProtocolError("bad_request", f"{path}: missing required field {name!r}")
+    return out

@@ -1,0 +1,283 @@
+"""The subsim runtime: owns committed state and time, the latest trial and the committed history.
+
+It serves the nine commands for one model, identically whether called in-process or from the bus.
+Every command either succeeds or raises ``CosimError`` with nothing committed changed.
+"""
+
+from __future__ import annotations
+
+import os
+from collections import deque
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from cosim.protocol.errors import CosimError
+from cosim.protocol.messages import PROTOCOL_VERSION
+from cosim.signals import SCHEMES, Segment, SegmentError, check_time_grid
+from cosim.subsim import ModelError, Port, Subsim, as_ports
+
+DEFAULT_HISTORY = 32
+
+
+@dataclass(frozen=True)
+class _Trial:
+    epoch: int  # committed epoch the trial started from
+    end_time: float
+    end_state: np.ndarray
+
+
+def _readonly(a: np.ndarray) -> np.ndarray:
+    a = np.array(a, dtype=np.float64, copy=True)
+    a.setflags(write=False)
+    return a
+
+
+def _port_map(ports: Mapping[str, Port]) -> dict[str, dict]:
+    return {k: {"size": p.size, "unit": p.unit, "doc": p.doc} for k, p in ports.items()}
+
+
+class Runtime:
+    """Commit/rollback bookkeeping around one :class:`Subsim` model."""
+
+    def __init__(self, model: Subsim, name: str | None = None, history_limit: int = DEFAULT_HISTORY) -> None:
+        self.model = model
+        self.name = name or model.name
+        self.history_limit = history_limit
+        self.inputs: dict[str, Port] = as_ports(model.inputs)
+        self.outputs: dict[str, Port] = as_ports(model.outputs)
+        self.time: float | None = None
+        self.state: np.ndarray | None = None
+        self.history: deque[tuple[float, np.ndarray]] = deque(maxlen=history_limit)
+        self.trial: _Trial | None = None
+        self.epoch = 0
+        self.requests = 0
+        self.shutdown_requested = False
+        self._commands: dict[str, Callable[..., dict]] = {
+            "describe": self.describe,
+            "configure": self.configure,
+            "run_interval": self.run_interval,
+            "commit": self.commit,
+            "rollback": self.rollback,
+            "get_state": self.get_state,
+            "set_state": self.set_state,
+            "status": self.status,
+            "shutdown": self.shutdown,
+        }
+
+    @property
+    def model_id(self) -> str:
+        cls = type(self.model)
+        return f"{cls.__module__}.{cls.__qualname__}"
+
+    def handle(self, cmd: str, args: Mapping[str, Any]) -> dict:
+        """Run one decoded command. Raises ``CosimError`` only."""
+        self.requests += 1
+        fn = self._commands.get(cmd)
+        if fn is None:
+            raise CosimError("unknown_command", f"unknown command {cmd!r}")
+        try:
+            return fn(**args)
+        except CosimError:
+            raise
+        except TypeError as exc:  # wrong keyword arguments from an in-process caller
+            raise CosimError("bad_request", f"{cmd}: {exc}") from None
+
+    # --- commands -----------------------------------------------------------------------------
+
+    def describe(self) -> dict:
+        return {
+            "name": self.name,
+            "model": self.model_id,
+            "inputs": _port_map(self.inputs),
+            "outputs": _port_map(self.outputs),
+            "algebraic": bool(self.model.algebraic),
+            "configured": self.state is not None,
+            "time": self.time,
+            "history_limit": self.history_limit,
+            "protocol": PROTOCOL_VERSION,
+        }
+
+    def configure(self, params: Mapping[str, Any], t0: float = 0.0) -> dict:
+        """Fresh model instance from ``params``; the old configuration stays if this fails."""
+        t0 = self._finite_float(t0, "t0")
+        model = type(self.model)()
+        try:
+            state = model.initial_state(dict(params))
+            inputs, outputs = as_ports(model.inputs), as_ports(model.outputs)
+        except ModelError as exc:
+            raise CosimError("model_error", f"configure: {exc}") from None
+        except (ValueError, KeyError, TypeError) as exc:
+            raise CosimError("bad_value", f"configure: bad parameter: {exc}") from None
+        state = self._check_state(state, None, "initial_state() returned state")
+        self.model, self.inputs, self.outputs = model, inputs, outputs
+        self._set_committed(t0, state)
+        self.history.clear()
+        return self.describe()
+
+    def run_interval(self, t: Any, inputs: Mapping[str, Any], interp: str = "linear") -> dict:
+        state, t0 = self._require_configured()
+        try:
+            times = check_time_grid(t, "t")
+        except SegmentError as exc:
+            raise CosimError("bad_value", str(exc)) from None
+        if times.size < 2:
+            raise CosimError("bad_value", f"t must hold at least 2 sample times, got {times.size}")
+        if times[0] != t0:
+            raise CosimError("time_mismatch", f"interval starts at t={float(times[0])!r} but the committed time is {t0!r}")
+        if interp not in SCHEMES:
+            raise CosimError("bad_value", f"interp: unknown scheme {interp!r}; known: {', '.join(SCHEMES)}")
+        u = self._input_function(times, inputs, interp)
+        try:
+            outputs, end_state = self.model.advance(state, times, u)
+        except ModelError as exc:
+            raise CosimError("model_error", f"at t in [{times[0]}, {times[-1]}]: {exc}") from None
+        except Exception as exc:
+            raise CosimError("internal", f"advance raised {type(exc).__name__}: {exc}") from None
+        checked = self._check_outputs(outputs, times)
+        end_state = self._check_state(end_state, state.size, "advance() returned end state")
+        self.trial = _Trial(self.epoch, float(times[-1]), end_state)
+        return {"t": times, "outputs": checked, "end_time": float(times[-1])}
+
+    def commit(self) -> dict:
+        self._require_configured()
+        trial = self.trial
+        if trial is None:
+            raise CosimError("no_trial", "commit without a run_interval since the last commit, rollback or set_state")
+        if trial.epoch != self.epoch:
+            raise CosimError("stale_trial", "the latest trial started from a committed state that has since changed")
+        self.history.append((self.time, self.state))
+        self._set_committed(trial.end_time, trial.end_state)
+        return {"time": self.time}
+
+    def rollback(self, to_time: float | None = None) -> dict:
+        self._require_configured()
+        self.trial = None
+        if to_time is None or to_time == self.time:
+            return {"time": self.time}
+        times = [t for t, _ in self.history]
+        if to_time not in times:
+            shown = ", ".join(repr(x) for x in times[-5:]) or "none"
+            raise CosimError("not_in_history", f"no committed state at t={to_time!r}; latest kept: {shown}")
+        while self.history:
+            t, s = self.history.pop()
+            if t == to_time:
+                self._set_committed(t, s)
+                break
+        return {"time": self.time}
+
+    def get_state(self) -> dict:
+        state, t = self._require_configured()
+        return {"time": t, "state": state, "model": self.model_id}
+
+    def set_state(self, time: float, state: Any) -> dict:
+        current, _ = self._require_configured()
+        time = self._finite_float(time, "time")
+        new = self._check_state(state, current.size, "state")
+        self._set_committed(time, new)
+        self.history.clear()
+        return {"time": self.time}
+
+    def status(self) -> dict:
+        return {
+            "name": self.name,
+            "configured": self.state is not None,
+            "time": self.time,
+            "has_trial": self.trial is not None and self.trial.epoch == self.epoch,
+            "history": len(self.history),
+            "requests": self.requests,
+            "pid": os.getpid(),
+        }
+
+    def shutdown(self) -> dict:
+        self.shutdown_requested = True
+        return {}
+
+    # --- helpers ------------------------------------------------------------------------------
+
+    def _set_committed(self, time: float, state: np.ndarray) -> None:
+        self.time, self.state = float(time), _readonly(state)
+        self.trial = None
+        self.epoch += 1
+
+    def _require_configured(self) -> tuple[np.ndarray, float]:
+        if self.state is None or self.time is None:
+            raise CosimError("not_configured", "configure the subsim first")
+        return self.state, self.time
+
+    @staticmethod
+    def _finite_float(x: Any, what: str) -> float:
+        try:
+            f = float(x)
+        except (TypeError, ValueError):
+            raise CosimError("bad_value", f"{what} must be a number, got {x!r}") from None
+        if not np.isfinite(f):
+            raise CosimError("bad_value", f"{what} must be finite, got {f!r}")
+        return f
+
+    @staticmethod
+    def _check_state(state: Any, size: int | None, what: str) -> np.ndarray:
+        try:
+            s = np.asarray(state, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise CosimError("bad_value", f"{what} is not a float vector") from None
+        if s.ndim != 1 or (size is not None and s.size != size):
+            want = f"({size},)" if size is not None else "1-D"
+            raise CosimError("bad_value", f"{what} must have shape {want}, got {s.shape}")
+        if not np.all(np.isfinite(s)):
+            raise CosimError("model_error" if "returned" in what else "bad_value", f"{what} contains NaN or inf")
+        return _readonly(s)
+
+    def _input_function(
+        self, times: np.ndarray, inputs: Mapping[str, Any], interp: str
+    ) -> Callable[[float], dict[str, np.ndarray]]:
+        if not isinstance(inputs, Mapping):
+            raise CosimError("bad_value", "inputs must be a map of input name -> samples")
+        missing = [k for k in self.inputs if k not in inputs]
+        unknown = [k for k in inputs if k not in self.inputs]
+        if missing or unknown:
+            parts = [f"missing {missing}" if missing else "", f"unknown {unknown}" if unknown else ""]
+            known = ", ".join(f"{k}({p.size})" for k, p in self.inputs.items()) or "none"
+            raise CosimError("bad_value", f"inputs: {'; '.join(p for p in parts if p)}; this subsim takes: {known}")
+        if not self.inputs:
+            return lambda t: {}
+        columns, slices, start = [], {}, 0
+        for name, port in self.inputs.items():
+            try:
+                v = np.asarray(inputs[name], dtype=np.float64)
+            except (TypeError, ValueError):
+                raise CosimError("bad_value", f"inputs.{name}: not a float array") from None
+            if v.shape != (times.size, port.size):
+                raise CosimError(
+                    "bad_value", f"inputs.{name}: expected shape ({times.size}, {port.size}), got {v.shape}"
+                )
+            if not np.all(np.isfinite(v)):
+                raise CosimError("bad_value", f"inputs.{name}: contains NaN or inf")
+            columns.append(v)
+            slices[name] = slice(start, start + port.size)
+            start += port.size
+        at = Segment(times, np.hstack(columns)).interpolant(interp)
+        items = tuple(slices.items())
+        return lambda t: (lambda x: {k: x[s] for k, s in items})(at(t))
+
+    def _check_outputs(self, outputs: Mapping[str, Any], times: np.ndarray) -> dict[str, np.ndarray]:
+        if not isinstance(outputs, Mapping):
+            raise CosimError("internal", f"advance() must return a map of outputs, got {type(outputs).__name__}")
+        checked = {}
+        for name, port in self.outputs.items():
+            if name not in outputs:
+                raise CosimError("internal", f"advance() did not return output {name!r}")
+            v = np.asarray(outputs[name], dtype=np.float64)
+            if v.ndim == 1 and port.size == 1:
+                v = v.reshape(-1, 1)
+            if v.shape != (times.size, port.size):
+                raise CosimError(
+                    "internal", f"advance() output {name!r} has shape {v.shape}, expected ({times.size}, {port.size})"
+                )
+            if not np.all(np.isfinite(v)):
+                i = int(np.argwhere(~np.isfinite(v))[0][0])
+                raise CosimError("model_error", f"output {name!r} is not finite at t={times[i]!r}")
+            checked[name] = v
+        return checked

@@ -1,0 +1,96 @@
+"""The model author's API: subclass :class:`Subsim`, declare ports, write a pure ``advance``.
+
+The author writes physics only. Committed state, trials, history, validation and the wire
+all belong to :class:`cosim.runtime.Runtime`.
+
+    class Integrator(Subsim):
+        inputs = {"u": Port(1, "1/s")}
+        outputs = {"y": Port(1)}
+
+        def initial_state(self, params):
+            return np.array([params.get("y0", 0.0)])
+
+        def advance(self, state, times, u):
+            ...  # integrate from times[0] to times[-1], reading u(t)["u"]
+            return {"y": samples_of_y}, end_state
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+
+InputFunction = Callable[[float], Mapping[str, np.ndarray]]
+
+
+@dataclass(frozen=True)
+class Port:
+    """One named vector signal of a subsim: its width, unit and a short description."""
+
+    size: int
+    unit: str = ""
+    doc: str = ""
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.size, int) or self.size < 1:
+            raise ValueError(f"port size must be a positive int, got {self.size!r}")
+
+
+PortSpec = Port | int | tuple
+
+
+def as_port(spec: PortSpec) -> Port:
+    """Accept ``Port``, ``3`` or ``(3, "m")`` / ``(3, "m", "doc")``."""
+    if isinstance(spec, Port):
+        return spec
+    if isinstance(spec, int):
+        return Port(spec)
+    if isinstance(spec, tuple):
+        return Port(*spec)
+    raise TypeError(f"cannot make a port from {spec!r}")
+
+
+def as_ports(specs: Mapping[str, PortSpec]) -> dict[str, Port]:
+    return {name: as_port(spec) for name, spec in specs.items()}
+
+
+class ModelError(RuntimeError):
+    """Raised by a model when it cannot advance (e.g. an attitude singularity); reported, not fatal."""
+
+
+class Subsim:
+    """Base class of a subsystem simulation model.
+
+    Class attributes (an instance may replace ``inputs``/``outputs`` in ``initial_state``
+    when its ports depend on parameters):
+
+    - ``name``: default instance name on the bus.
+    - ``inputs``, ``outputs``: ``{port name: Port | size | (size, unit[, doc])}``.
+    - ``algebraic``: True when the model has no state (outputs depend on inputs only).
+    """
+
+    name: ClassVar[str] = "subsim"
+    inputs: Mapping[str, PortSpec] = {}
+    outputs: Mapping[str, PortSpec] = {}
+    algebraic: ClassVar[bool] = False
+
+    def initial_state(self, params: Mapping[str, Any]) -> np.ndarray:
+        """Read parameters (keep what ``advance`` needs on ``self``); return the state at t0.
+
+        Raise ``ValueError``/``KeyError`` naming the offending parameter on bad input.
+        """
+        raise NotImplementedError
+
+    def advance(
+        self, state: np.ndarray, times: np.ndarray, u: InputFunction
+    ) -> tuple[Mapping[str, np.ndarray], np.ndarray]:
+        """Advance from ``state`` at ``times[0]`` over the sample ``times`` (n,).
+
+        ``u(t)`` returns ``{input name: array (size,)}`` interpolated at any ``t`` in the interval.
+        Return ``({output name: array (n, size)}, state at times[-1])``. Must be pure: the same
+        arguments always give the same result, and ``state`` must not be modified in place.
+        """
+        raise NotImplementedError

@@ -1,0 +1,36 @@
+"""Single integrator y' = u (the paper's §2.3 building block)."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from cosim.subsim import InputFunction, Port, Subsim
+from subsims.integrator.model import integrate_once
+
+
+def _vector(params: Mapping[str, Any], key: str, size: int) -> np.ndarray:
+    v = np.atleast_1d(np.asarray(params.get(key, np.zeros(size)), dtype=float))
+    if v.shape != (size,):
+        raise ValueError(f"{key} must have {size} entries, got {v.size}")
+    return v
+
+
+class Integrator(Subsim):
+    """y' = u. Parameters: ``size`` (default 1), ``y0`` (default zeros)."""
+
+    name = "integrator"
+    inputs = {"u": Port(1, "", "rate of y")}
+    outputs = {"y": Port(1)}
+
+    def initial_state(self, params: Mapping[str, Any]) -> np.ndarray:
+        size = int(params.get("size", 1))
+        self.inputs = {"u": Port(size, "", "rate of y")}
+        self.outputs = {"y": Port(size)}
+        return _vector(params, "y0", size)
+
+    def advance(self, state: np.ndarray, times: np.ndarray, u: InputFunction):
+        y = integrate_once(lambda t: u(t)["u"], times, state)
+        return {"y": y}, y[-1]
