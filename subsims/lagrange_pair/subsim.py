@@ -1,0 +1,83 @@
+"""Thin subsim adapter of the SRB + parachute pair (physics in :mod:`subsims.lagrange_pair.model`).
+
+State: the model's state vector; with the default ``formulation="stabilized"`` this is the
+listing's minimal 30-vector (both attitude matrices, V_B, W_B, W_C, R_B), so a committed or
+restored state can never violate the joint. Inputs are extra loads on each body (body axes,
+about the CM), read inside every Runge-Kutta stage by calling ``u(t)``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from cosim.subsim import InputFunction, ModelError, Port, Subsim
+from subsims.lagrange_pair import model
+
+INPUT_PORTS: dict[str, Port] = {
+    "force_B": Port(3, "lbf", "extra force on the SRB at its CM, B axes"),
+    "moment_B": Port(3, "lbf*ft", "extra moment on the SRB about its CM, B axes"),
+    "force_C": Port(3, "lbf", "extra force on the parachute at its CM, C axes"),
+    "moment_C": Port(3, "lbf*ft", "extra moment on the parachute about its CM, C axes"),
+}
+
+OUTPUT_PORTS: dict[str, Port] = {
+    "pos_B": Port(3, "ft", "SRB CM position, I frame (north, east, down)"),
+    "pos_C": Port(3, "ft", "parachute CM position, I frame"),
+    "vel_B": Port(3, "ft/s", "SRB CM velocity, B axes"),
+    "vel_C": Port(3, "ft/s", "parachute CM velocity, C axes"),
+    "vel_B_I": Port(3, "ft/s", "SRB CM velocity, I frame"),
+    "vel_C_I": Port(3, "ft/s", "parachute CM velocity, I frame"),
+    "euler_B": Port(3, "rad", "SRB 3-2-1 Euler angles (psi, theta, phi) relative to I"),
+    "euler_C": Port(3, "rad", "parachute 3-2-1 Euler angles (psi, theta, phi) relative to I"),
+    "dcm_B": Port(9, "", "I->B direction cosine matrix ABI, row-major"),
+    "dcm_C": Port(9, "", "I->C direction cosine matrix ACI, row-major"),
+    "omega_B": Port(3, "rad/s", "SRB angular velocity, B axes"),
+    "omega_C": Port(3, "rad/s", "parachute angular velocity, C axes"),
+    "multiplier": Port(3, "lbf", "Lagrange multiplier = swivel force on the SRB, C axes (force on C is its negative)"),
+    "violation_pos": Port(3, "ft", "swivel separation: B's attach point minus C's, I frame"),
+    "violation_vel": Port(3, "ft/s", "velocity constraint residual A*Omega (eq. 12), C axes"),
+}
+
+assert tuple(OUTPUT_PORTS) == model.OUTPUT_NAMES
+
+
+class LagrangePair(Subsim):
+    """Two rigid bodies (SRB and drogue) on a frictionless swivel, Watts' drift-free Lagrange-multiplier form.
+
+    Parameters (all optional; defaults are the CHOSEN configuration in ``model.DEFAULT_PARAMS``):
+    ``formulation`` ("stabilized" | "velocity_only" | "unstabilized"), ``aero``, ``gravity``,
+    ``integrator`` ("rk4" | "euler"), ``dt`` (max sub-step, s), ``g``, ``weight_B``/``weight_C`` (lbf),
+    ``inertia_B``/``inertia_C`` (Ixx, Iyy, Izz, Ixy, Ixz, Iyz), ``attach_B``/``attach_C`` (ft, body axes),
+    the SRB's ``speed_B``, ``azimuth_B_deg``, ``flight_path_B_deg``, ``altitude_B``, ``rates_B_deg``,
+    ``alpha_B_deg``, ``phia_B_deg``, ``bank_B_deg``, the parachute's ``rates_C_deg``, ``euler_C_deg``,
+    and ``x0`` (an explicit initial state vector).
+    """
+
+    name = "lagrange_pair"
+    inputs = INPUT_PORTS
+    outputs = OUTPUT_PORTS
+
+    def initial_state(self, params: Mapping[str, Any]) -> np.ndarray:
+        self.model, self.dt, self.integrator, x0 = model.setup(params)
+        return x0
+
+    def advance(
+        self, state: np.ndarray, times: np.ndarray, u: InputFunction
+    ) -> tuple[Mapping[str, np.ndarray], np.ndarray]:
+        x0 = np.array(state, dtype=np.float64)  # private copy: the caller's state is never touched
+        if x0.shape != (self.model.state_size,):
+            raise ValueError(f"state must have shape ({self.model.state_size},), got {x0.shape}")
+
+        def loads(t: float) -> np.ndarray:
+            v = u(t)
+            return np.concatenate([np.asarray(v[k], dtype=np.float64).reshape(3) for k in INPUT_PORTS])
+
+        try:
+            samples, x1 = model.integrate(self.model, x0, np.asarray(times, dtype=np.float64), loads, self.dt,
+                                          self.integrator)
+        except FloatingPointError as exc:
+            raise ModelError(f"lagrange_pair: {exc}") from exc
+        return model.stack_outputs(self.model, samples), x1
