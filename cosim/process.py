@@ -1,6 +1,7 @@
 """Run a subsim model as its own process: ``python -m subsims.<name> --connect EP --run RUN``.
 
-Exit codes: 0 after ``shutdown``, SIGTERM, SIGINT or loss of the coordinator; 2 when the
+Exit codes: 0 after ``shutdown``, SIGTERM, SIGINT or loss of the coordinator (its liveliness
+token is deleted, or its router is unreachable for 2 s); 2 when the
 coordinator cannot be reached in time or the arguments are bad. Every path closes the Zenoh
 session (an open session keeps the process alive forever).
 """
@@ -11,6 +12,8 @@ import argparse
 import os
 import signal
 import sys
+import threading
+import time
 from collections.abc import Sequence
 
 import zenoh
@@ -48,6 +51,25 @@ def parse_args(model_cls: type[Subsim], argv: Sequence[str] | None) -> argparse.
     return args
 
 
+def _watch_router(session: zenoh.Session, grace: float = 2.0) -> None:
+    """SIGTERM ourselves when the coordinator's router has been unreachable for ``grace`` seconds.
+
+    A client whose router vanished gets no liveliness DELETE (its only link is gone), so poll.
+    """
+    lost_since = None
+    while True:
+        time.sleep(0.25)
+        try:
+            connected = any(True for _ in session.info.routers_zid())
+        except Exception:  # session closed: we are exiting anyway
+            return
+        now = time.monotonic()
+        lost_since = None if connected else (lost_since or now)
+        if lost_since is not None and now - lost_since >= grace:
+            os.kill(os.getpid(), signal.SIGTERM)
+            return
+
+
 def main(model_cls: type[Subsim], argv: Sequence[str] | None = None) -> int:
     args = parse_args(model_cls, argv)
     runtime = Runtime(model_cls(), name=args.name, history_limit=args.history)
@@ -65,7 +87,8 @@ def main(model_cls: type[Subsim], argv: Sequence[str] | None = None) -> int:
         server = CommandServer(
             session, args.run, runtime, on_coordinator_lost=lambda: os.kill(os.getpid(), signal.SIGTERM)
         )
-        print(f"{args.name}: serving run {args.run} via {args.connect} (pid {os.getpid()})", file=sys.stderr, flush=True)
+        threading.Thread(target=_watch_router, args=(session,), daemon=True, name="router-watch").start()
+        print(f"{args.name}: serving run {args.run} via {args.connect} (pid {os.getpid()})", file=sys.stderr)
         try:
             server.serve()
         except _Stop as why:

@@ -126,7 +126,8 @@ class Runtime:
         if times.size < 2:
             raise CosimError("bad_value", f"t must hold at least 2 sample times, got {times.size}")
         if times[0] != t0:
-            raise CosimError("time_mismatch", f"interval starts at t={float(times[0])!r} but the committed time is {t0!r}")
+            start = float(times[0])
+            raise CosimError("time_mismatch", f"interval starts at t={start!r} but the committed time is {t0!r}")
         if interp not in SCHEMES:
             raise CosimError("bad_value", f"interp: unknown scheme {interp!r}; known: {', '.join(SCHEMES)}")
         u = self._input_function(times, inputs, interp)
@@ -150,6 +151,7 @@ class Runtime:
             raise CosimError("stale_trial", "the latest trial started from a committed state that has since changed")
         self.history.append((self.time, self.state))
         self._set_committed(trial.end_time, trial.end_state)
+        self.trial = None
         return {"time": self.time}
 
     def rollback(self, to_time: float | None = None) -> dict:
@@ -198,8 +200,8 @@ class Runtime:
     # --- helpers ------------------------------------------------------------------------------
 
     def _set_committed(self, time: float, state: np.ndarray) -> None:
+        """Replace the committed state. A trial run before this is now stale (never committed)."""
         self.time, self.state = float(time), _readonly(state)
-        self.trial = None
         self.epoch += 1
 
     def _require_configured(self) -> tuple[np.ndarray, float]:

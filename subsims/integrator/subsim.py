@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import time
 from collections.abc import Mapping
 from typing import Any
 
@@ -19,7 +20,8 @@ def _vector(params: Mapping[str, Any], key: str, size: int) -> np.ndarray:
 
 
 class Integrator(Subsim):
-    """y' = u. Parameters: ``size`` (default 1), ``y0`` (default zeros)."""
+    """y' = u. Parameters: ``size`` (default 1), ``y0`` (default zeros), and ``compute_delay``:
+    seconds each ``advance`` sleeps, to stand in for an expensive model in benchmarks and fault tests."""
 
     name = "integrator"
     inputs = {"u": Port(1, "", "rate of y")}
@@ -29,8 +31,11 @@ class Integrator(Subsim):
         size = int(params.get("size", 1))
         self.inputs = {"u": Port(size, "", "rate of y")}
         self.outputs = {"y": Port(size)}
+        self.compute_delay = float(params.get("compute_delay", 0.0))
         return _vector(params, "y0", size)
 
     def advance(self, state: np.ndarray, times: np.ndarray, u: InputFunction):
+        if self.compute_delay > 0:
+            time.sleep(self.compute_delay)
         y = integrate_once(lambda t: u(t)["u"], times, state)
         return {"y": y}, y[-1]

@@ -1,0 +1,142 @@
+"""The subsim contract (commit/rollback/state semantics, bad input), same body for both handles."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cosim.handles import InProcessHandle, SubsimHandle
+from cosim.protocol.errors import SubsimError
+from subsims.integrator.subsim import Integrator
+
+N = 5
+TIMES = np.linspace(0.0, 0.4, N)
+
+
+@pytest.fixture(params=["inprocess", "remote"])
+def handle(request: pytest.FixtureRequest) -> SubsimHandle:
+    if request.param == "inprocess":
+        h = InProcessHandle(Integrator(), name="integ")
+    else:
+        h = request.getfixturevalue("spawn_subsim")("subsims.integrator", name="integ")
+    h.configure({"size": 2, "y0": [1.0, -2.0]})
+    return h
+
+
+def ramp(t: np.ndarray) -> dict[str, np.ndarray]:
+    return {"u": np.column_stack([np.ones_like(t), t])}
+
+
+def committed(h: SubsimHandle) -> tuple[float, bytes]:
+    s = h.get_state()
+    return s.time, s.state.tobytes()
+
+
+def test_describe_reports_ports(handle: SubsimHandle) -> None:
+    d = handle.describe()
+    assert d.name == "integ" and d.configured and d.time == 0.0
+    assert {k: p.size for k, p in d.inputs.items()} == {"u": 2}
+    assert {k: p.size for k, p in d.outputs.items()} == {"y": 2}
+    assert d.protocol == 1 and not d.algebraic
+
+
+def test_run_interval_changes_nothing_committed_and_is_deterministic(handle: SubsimHandle) -> None:
+    before = committed(handle)
+    a = handle.run_interval(TIMES, ramp(TIMES))
+    b = handle.run_interval(TIMES, ramp(TIMES))
+    assert committed(handle) == before
+    assert a.outputs["y"].tobytes() == b.outputs["y"].tobytes()
+    assert a.end_time == 0.4
+    # y' = (1, t) from y0 = (1, -2): y = (1 + t, -2 + t^2/2), exact for the linear interpolant
+    np.testing.assert_allclose(a.outputs["y"], np.column_stack([1 + TIMES, -2 + TIMES**2 / 2]), rtol=0, atol=1e-15)
+
+
+def test_commit_promotes_latest_trial(handle: SubsimHandle) -> None:
+    handle.run_interval(TIMES, {"u": np.zeros((N, 2))})
+    last = handle.run_interval(TIMES, ramp(TIMES))
+    assert handle.commit() == 0.4
+    state = handle.get_state()
+    assert state.time == 0.4
+    assert state.state.tobytes() == last.outputs["y"][-1].tobytes()
+    with pytest.raises(SubsimError) as err:
+        handle.commit()
+    assert err.value.code == "no_trial" and err.value.subsim == "integ" and err.value.command == "commit"
+
+
+def test_commit_of_a_trial_made_stale_by_set_state_is_refused(handle: SubsimHandle) -> None:
+    snapshot = handle.get_state()
+    handle.run_interval(TIMES, ramp(TIMES))
+    handle.set_state(snapshot)
+    with pytest.raises(SubsimError) as err:
+        handle.commit()
+    assert err.value.code == "stale_trial"
+    assert committed(handle) == (snapshot.time, snapshot.state.tobytes())
+
+
+def test_rollback_discards_trial_and_returns_to_earlier_committed_time(handle: SubsimHandle) -> None:
+    states, start = [], 0.0
+    for _ in range(3):
+        t = start + TIMES
+        handle.run_interval(t, ramp(t))
+        start = handle.commit()
+        states.append(committed(handle))
+    handle.run_interval(start + TIMES, ramp(start + TIMES))
+    assert handle.rollback() == start
+    with pytest.raises(SubsimError) as err:
+        handle.commit()
+    assert err.value.code == "no_trial"
+    assert handle.rollback(to_time=states[0][0]) == states[0][0]
+    assert committed(handle) == states[0]
+    with pytest.raises(SubsimError) as err:
+        handle.rollback(to_time=states[1][0])  # later than the committed time: gone from history
+    assert err.value.code == "not_in_history"
+    assert committed(handle) == states[0]
+
+
+def test_get_and_set_state_round_trip_exactly(handle: SubsimHandle) -> None:
+    odd = np.array([np.nextafter(1.0, 2.0), -0.0])
+    handle.set_state(type(handle.get_state())(time=0.0, state=odd, model=""))
+    got = handle.get_state()
+    assert got.time == 0.0 and got.state.tobytes() == odd.tobytes()
+    assert got.model.endswith("Integrator")
+
+
+BAD_REQUESTS = {
+    "wrong_input_size": lambda h: h.run_interval(TIMES, {"u": np.zeros((N, 3))}),
+    "wrong_sample_count": lambda h: h.run_interval(TIMES, {"u": np.zeros((N - 1, 2))}),
+    "nan_input": lambda h: h.run_interval(TIMES, {"u": np.full((N, 2), np.nan)}),
+    "inf_time": lambda h: h.run_interval(np.array([0.0, np.inf]), {"u": np.zeros((2, 2))}),
+    "time_not_increasing": lambda h: h.run_interval(TIMES[::-1].copy(), {"u": np.zeros((N, 2))}),
+    "start_not_committed_time": lambda h: h.run_interval(TIMES + 1.0, {"u": np.zeros((N, 2))}),
+    "missing_input": lambda h: h.run_interval(TIMES, {}),
+    "unknown_input": lambda h: h.run_interval(TIMES, {"u": np.zeros((N, 2)), "w": np.zeros((N, 1))}),
+    "unknown_scheme": lambda h: h.run_interval(TIMES, {"u": np.zeros((N, 2))}, interp="spline9"),
+    "unknown_field": lambda h: h._call("commit", force=True),
+    "set_state_wrong_size": lambda h: h._call("set_state", time=0.0, state=np.zeros(3)),
+    "set_state_nan": lambda h: h._call("set_state", time=0.0, state=np.array([np.nan, 0.0])),
+    "configure_bad_param": lambda h: h.configure({"size": 2, "y0": [1.0]}),
+}
+
+
+@pytest.mark.parametrize("bad", list(BAD_REQUESTS))
+def test_bad_request_gets_error_and_leaves_committed_state_untouched(handle: SubsimHandle, bad: str) -> None:
+    handle.run_interval(TIMES, ramp(TIMES))
+    handle.commit()
+    before = committed(handle)
+    good = handle.run_interval(TIMES + 0.4, ramp(TIMES + 0.4))
+    with pytest.raises(SubsimError) as err:
+        BAD_REQUESTS[bad](handle)
+    assert err.value.subsim == "integ" and err.value.code in {"bad_value", "bad_request", "time_mismatch"}
+    assert err.value.message
+    assert committed(handle) == before
+    # the subsim still serves, and the earlier good trial is still the one a commit promotes
+    assert handle.status()["configured"]
+    assert handle.commit() == 0.8
+    assert handle.get_state().state.tobytes() == good.outputs["y"][-1].tobytes()
+
+
+def test_commands_before_configure_are_refused() -> None:
+    h = InProcessHandle(Integrator())
+    with pytest.raises(SubsimError) as err:
+        h.run_interval(TIMES, {"u": np.zeros((N, 1))})
+    assert err.value.code == "not_configured"

@@ -1,0 +1,75 @@
+"""Subsim processes: death is reported quickly, and every exit path really exits."""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from cosim.launch import Bus, subsim_command
+from cosim.protocol.errors import SubsimDied
+
+TIMES = np.linspace(0.0, 0.4, 5)
+
+
+def test_kill_9_mid_run_is_reported_within_one_second(cosim_bus: Bus) -> None:
+    proc = cosim_bus.spawn("subsims.integrator", "victim")
+    proc.handle.configure({"compute_delay": 30.0})
+    pending = proc.handle.start_run_interval(TIMES, {"u": np.zeros((5, 1))})
+    time.sleep(0.3)
+    os.kill(proc.popen.pid, signal.SIGKILL)
+    killed = time.monotonic()
+    with pytest.raises(SubsimDied) as err:
+        pending()
+    assert time.monotonic() - killed < 1.0
+    assert err.value.subsim == "victim" and err.value.command == "run_interval"
+    with pytest.raises(SubsimDied):  # later calls fail at once too
+        proc.handle.status()
+
+
+@pytest.mark.parametrize("how", ["shutdown", "SIGTERM", "SIGINT"])
+def test_subsim_exits_with_code_0(cosim_bus: Bus, how: str) -> None:
+    proc = cosim_bus.spawn("subsims.integrator", f"quitter-{how}")
+    if how == "shutdown":
+        proc.handle.shutdown()
+    else:
+        proc.popen.send_signal(getattr(signal, how))
+    assert proc.popen.wait(10) == 0
+
+
+def test_subsim_exits_when_the_coordinator_goes_away() -> None:
+    bus = Bus.open()
+    popen = subprocess.Popen(subsim_command("subsims.integrator", bus.endpoint, bus.run, "orphan"))
+    try:
+        bus.attach("orphan")
+        bus.session.close()
+        assert popen.wait(10) == 0
+    finally:
+        if popen.poll() is None:
+            popen.kill()
+            popen.wait()
+
+
+def _unused_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_unreachable_endpoint_exits_with_a_clear_message() -> None:
+    cmd = subsim_command("subsims.integrator", f"tcp/127.0.0.1:{_unused_port()}", "run-x", "lonely")
+    done = subprocess.run([*cmd, "--connect-timeout", "0.5"], capture_output=True, text=True, timeout=30)
+    assert done.returncode == 2
+    assert "cannot reach the coordinator" in done.stderr and "lonely" in done.stderr
+
+
+def test_bad_command_line_is_rejected() -> None:
+    cmd = [sys.executable, "-m", "subsims.integrator", "--connect", "tcp/127.0.0.1:1", "--run", "a/b*"]
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=30)
+    assert done.returncode == 2 and "--run" in done.stderr
