@@ -1,0 +1,46 @@
+"""Subsim adapter of the box aerodynamics (subsystem 3 of the paper; aerodyn.f mode 3)."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from cosim.subsim import InputFunction, Port, Subsim
+from subsims.aero.model import AeroParams, aero_loads
+
+
+class Aero(Subsim):
+    """Six-facet box in free-molecular drag, constant density. Algebraic: evaluated at the sample times only.
+
+    Parameters (all optional, paper's values by default): ``rho`` (kg/m^3), ``cd``, ``length``, ``width``,
+    ``height`` (m, box along body x, y, z).
+    """
+
+    name = "aero"
+    algebraic = True
+    inputs = {
+        "R_body": Port(3, "m", "orbit radius in body axes (unused: density is constant)"),
+        "V_body": Port(3, "m/s", "flow-relative (= inertial) velocity in body axes"),
+    }
+    outputs = {
+        "force": Port(3, "N", "aerodynamic force, body (= geometric) axes, acting at the geometric origin"),
+        "torque": Port(3, "N m", "aerodynamic torque about the geometric origin, body axes"),
+    }
+
+    def initial_state(self, params: Mapping[str, Any]) -> np.ndarray:
+        self.p = AeroParams.from_mapping(params)
+        self.facets = self.p.facets
+        return np.empty(0, dtype=np.float64)
+
+    def advance(
+        self, state: np.ndarray, times: np.ndarray, u: InputFunction
+    ) -> tuple[dict[str, np.ndarray], np.ndarray]:
+        n = len(times)
+        force = np.empty((n, 3))
+        torque = np.empty((n, 3))
+        for j, t in enumerate(np.asarray(times, dtype=np.float64).tolist()):
+            vel_b = np.asarray(u(t)["V_body"], dtype=np.float64).tolist()
+            force[j], torque[j] = aero_loads(vel_b, self.p, self.facets)
+        return {"force": force, "torque": torque}, np.empty(0, dtype=np.float64)

@@ -1,0 +1,4 @@
+from cosim.process import main
+from subsims.attitude.subsim import Attitude
+
+raise SystemExit(main(Attitude))

@@ -1,0 +1,4 @@
+from cosim.process import main
+from subsims.orbit.subsim import Orbit
+
+raise SystemExit(main(Orbit))

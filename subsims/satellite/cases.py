@@ -1,0 +1,56 @@
+"""The paper's three control cases and run settings as plain dicts (spec §9.1, §7.5, §3.5, §7.8).
+
+Every case uses the same orbit, aero and transfer; only the attitude gains differ (spec §7.5 table;
+text §7.1: "For case 2, the Z-axis control gains were set to zero; and for case 3, all control gains
+were set to zero"). Parameter names are those of ``Orbit``, ``Attitude`` and ``Aero``; omitted ones take
+the paper's defaults (spec §7). ``transfer`` are the params of ``transforms.torque_to_cm``.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+# spec §7.8: circular 300 km orbit, 30 deg inclination, start at the northernmost point; spec §7.2 mass
+ORBIT: dict[str, Any] = {"altitude_km": 300.0, "inclination_deg": 30.0, "mass": 10000.0, "idiv": 1}
+
+# spec §7.6: rho 1.95e-11 kg/m^3 constant, Cd 2.25, 15 x 4 x 3 m box
+AERO: dict[str, Any] = {"rho": 1.95e-11, "cd": 2.25, "length": 15.0, "width": 4.0, "height": 3.0}
+
+# spec §7.4: inertia diag(11250, 193125, 0.9*193125) kg m^2; spec §7.8: phi0 = omega0 = 0; spec §3.2: idiv 1
+_ATTITUDE: dict[str, Any] = {"inertia": [11250.0, 193125.0, 0.9 * 193125.0], "phi0": [0.0, 0.0, 0.0],
+                             "omega0": [0.0, 0.0, 0.0], "idiv": 1}
+
+# spec §7.4 r_cm (1.0, 0.1, 0.1) m; spec §7.6/§12.1 item 2: the listings' sign T + r_cm x F
+TRANSFER: dict[str, Any] = {"r_cm": [1.0, 0.1, 0.1], "physical": False}
+
+_FULL = {"a0": 1000.0, "a1": 100.0, "b0": 1000.0, "b1": 100.0, "c0": 1000.0, "c1": 100.0}
+
+CASES: dict[str, dict[str, Any]] = {
+    # case 1: full inertial three-axis control (attitude.f as listed)
+    "case1": {"orbit": dict(ORBIT), "attitude": {**_ATTITUDE, **_FULL}, "aero": dict(AERO),
+              "transfer": dict(TRANSFER)},
+    # case 2: two-axis control, z gains zero
+    "case2": {"orbit": dict(ORBIT), "attitude": {**_ATTITUDE, **_FULL, "c0": 0.0, "c1": 0.0},
+              "aero": dict(AERO), "transfer": dict(TRANSFER)},
+    # case 3: no control, tumble (rku.f as listed: control=0)
+    "case3": {"orbit": dict(ORBIT), "attitude": {**_ATTITUDE, **{g: 0.0 for g in _FULL}},
+              "aero": dict(AERO), "transfer": dict(TRANSFER)},
+}
+
+# spec §9.1 / §3.1: ndp 5 samples per interval incl. both ends, dtmaj 0.4 s -> delt 0.1 s; 60,000 s runs
+RUN: dict[str, Any] = {"ndp": 5, "dtmaj": 0.4, "delt": 0.1, "t_stop": 60000.0, "itmax": 100}
+
+# spec §3.5: span-relative tol and absolute res, per scalar signal, max-abs stage difference
+METHODS: dict[str, dict[str, Any]] = {
+    "rfc": {"tol": 1e-12, "res": 1e-12, "check": "all 18 subsystem outputs"},
+    "rfd": {"tol": 1e-14, "res": 1e-14, "check": "the 6 feedback signals (aero force inertial, torque at c.m.)",
+            "order": ["orbit", "attitude", "aero"]},
+    "rku": {"dt": 0.1},
+}
+
+# spec §7.9: the REAL*4-promoted literals, for bit-level experiments only (merge into the dicts above)
+FORTRAN_LITERALS: dict[str, dict[str, Any]] = {
+    "orbit": {"mu": 3.985140958624097e14},
+    "attitude": {"mu": 3.985140958624097e14, "inertia": [11250.0, 193125.0, 173812.4953955412]},
+    "aero": {"rho": 1.950000057260315e-11},
+}

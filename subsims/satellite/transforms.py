@@ -1,0 +1,60 @@
+"""Coupling transforms of the satellite (spec §4.3 RF-C ``coupler``, §5.2 RF-D ``coupler2``/``coupler3``).
+
+Vectorised over samples: ``f(*sources (n, size_i), **params) -> (n, size_out)``. The DCM is eq. 15's
+A(phi) = R1(phi_x) R2(phi_y) R3(phi_z), inertial -> body (``dcm321``); body -> inertial is A^T.
+
+Body and geometric axes are parallel (paper fig. 3), so body-frame force components are the geometric ones.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from subsims.attitude.model import dcm321_batch
+from subsims.satellite.constants import R_CM
+
+
+def _rows(x: np.ndarray, what: str) -> np.ndarray:
+    a = np.asarray(x, dtype=np.float64)
+    if a.ndim == 1:
+        a = a.reshape(1, -1)
+    if a.ndim != 2 or a.shape[1] != 3:
+        raise ValueError(f"{what} must have shape (n, 3), got {np.shape(x)}")
+    return a
+
+
+def _pair(a: np.ndarray, b: np.ndarray, what_a: str, what_b: str) -> tuple[np.ndarray, np.ndarray]:
+    a, b = _rows(a, what_a), _rows(b, what_b)
+    if a.shape[0] != b.shape[0]:
+        raise ValueError(f"{what_a} has {a.shape[0]} samples but {what_b} has {b.shape[0]}")
+    return a, b
+
+
+def body_to_inertial(vec_b: np.ndarray, phi: np.ndarray) -> np.ndarray:
+    """A(phi)^T v_b: e.g. aero force body -> inertial for the orbit (coupler / coupler3: tran3 + matvec)."""
+    v, p = _pair(vec_b, phi, "vec_b", "phi")
+    return np.einsum("nji,nj->ni", dcm321_batch(p), v)
+
+
+def inertial_to_body(vec_i: np.ndarray, phi: np.ndarray) -> np.ndarray:
+    """A(phi) v_i: orbit radius / velocity inertial -> body for the aerodynamics (coupler / coupler2)."""
+    v, p = _pair(vec_i, phi, "vec_i", "phi")
+    return np.einsum("nij,nj->ni", dcm321_batch(p), v)
+
+
+def torque_to_cm(torque: np.ndarray, force: np.ndarray, r_cm: Sequence[float] = R_CM,
+                 physical: bool = False) -> np.ndarray:
+    """Aero torque about the c.m. from the torque about the geometric origin and the force acting there.
+
+    ``physical=False`` (default): the listings' T + r_cm x F (coupler, coupler3, rku sub), to match the
+    paper's runs. ``physical=True``: eq. 21, T - r_cm x F, the correct moment about the c.m.
+    ``r_cm``: c.m. in geometric body coordinates (m), paper (1.0, 0.1, 0.1).
+    """
+    t, f = _pair(torque, force, "torque", "force")
+    r = np.asarray(r_cm, dtype=np.float64)
+    if r.shape != (3,):
+        raise ValueError(f"parameter 'r_cm' must be 3 numbers, got {r_cm!r}")
+    rxf = np.cross(np.broadcast_to(r, f.shape), f)
+    return t - rxf if physical else t + rxf
