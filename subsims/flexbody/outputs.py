@@ -1,0 +1,66 @@
+"""Output samples of the flexbody from its state samples (shared by the adapter and the monolithic references)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from subsims.flexbody.appendage import appendage_loads
+from subsims.flexbody.kinematics import euler_zyx_from_dcm, quat_to_dcm
+from subsims.flexbody.model import (
+    FlexModel,
+    Loads,
+    accelerations,
+    deflections,
+    elastic_energy,
+    kinetic_energy,
+    momenta,
+    split_state,
+)
+
+FREE_OUTPUTS = ("R", "euler123", "euler_zyx", "quat", "V", "omega", "omega_dot", "eta", "eta_dot", "q", "q_dot",
+                "kinetic_energy", "elastic_energy", "p_I", "H_O")
+
+
+def free_outputs(
+    model: FlexModel, times: np.ndarray, ys: np.ndarray, loads: Callable[[float, np.ndarray], Loads]
+) -> dict[str, np.ndarray]:
+    """Mode "free" outputs at each sample (row of ``ys``); omega_dot uses the loads at the sample."""
+    out: dict[str, list] = {name: [] for name in FREE_OUTPUTS}
+    for tt, y in zip(times, ys):
+        R, theta, eta, V, w, eta_dot, quat = split_state(y, model.t)
+        P, H = momenta(model, y)
+        sample = {
+            "R": R, "euler123": theta, "euler_zyx": euler_zyx_from_dcm(quat_to_dcm(quat)), "quat": quat,
+            "V": V, "omega": w, "omega_dot": accelerations(model, V, w, eta, eta_dot, loads(float(tt), y))[3:6],
+            "eta": eta, "eta_dot": eta_dot,
+            "q": deflections(model, eta).ravel(), "q_dot": deflections(model, eta_dot).ravel(),
+            "kinetic_energy": [kinetic_energy(model, V, w, eta, eta_dot)],
+            "elastic_energy": [elastic_energy(model, eta)],
+            "p_I": P, "H_O": H,
+        }
+        for name in out:
+            out[name].append(sample[name])
+    return {name: np.array(v, dtype=np.float64).reshape(len(times), -1) for name, v in out.items()}
+
+
+def appendage_outputs(
+    model: FlexModel,
+    times: np.ndarray,
+    ys: np.ndarray,
+    solve: Callable[[float, np.ndarray], tuple[dict[str, np.ndarray], np.ndarray, np.ndarray]],
+    D: np.ndarray,
+) -> dict[str, np.ndarray]:
+    """Modes "attitude"/"base" outputs; ``solve(t, y) -> (inputs at t, a_O, eta_ddot)``."""
+    t = model.t
+    out: dict[str, list] = {}
+    for tt, y in zip(times, ys):
+        d, a_O, eta_dd = solve(float(tt), y)
+        eta, eta_dot = y[:t], y[t:]
+        sample = appendage_loads(model, eta, eta_dot, eta_dd, a_O, d["omega"], d["omega_dot"], d["fp"], D)
+        sample.update(a_O=a_O, eta=eta, eta_dot=eta_dot, q=deflections(model, eta).ravel(),
+                      q_dot=deflections(model, eta_dot).ravel(), elastic_energy=[elastic_energy(model, eta)])
+        for name, v in sample.items():
+            out.setdefault(name, []).append(v)
+    return {name: np.array(v, dtype=np.float64).reshape(len(times), -1) for name, v in out.items()}

@@ -1,0 +1,179 @@
+"""Subsim adapter of the flexible spacecraft (physics in model.py, appendage.py; parameters in vehicle.py).
+
+Ports depend on ``mode`` and on n (particles) and t (retained modes), so ``initial_state`` sets them.
+All vectors are body axes unless marked inertial; unit labels follow ``units`` (default slug-ft-lbf-s).
+
+mode "free" (the report's vehicle, spec mode F). State: the report's Y (8-4) + attitude quaternion.
+  inputs   f0 (3) force at O_g; tau0 (3) torque about O_g; fp (3n) force on each particle (particle-major).
+  outputs  R (3, inertial), euler123 (3, rad, the report's 1-2-3 angles, continuous), quat (4, body->inertial,
+           scalar first), V (3), omega (3), omega_dot (3), eta, eta_dot (t), q, q_dot (3n), kinetic_energy (1),
+           elastic_energy (1), p_I (3, inertial linear momentum), H_O (3, inertial angular momentum about O).
+mode "attitude" (appendage under a rigid attitude simulator, spec mode C). State: (eta, eta_dot).
+  inputs   omega (3), omega_dot (3): the base's angular motion from the attitude simulator; f_bus (3) external
+           force on the base (moves a_O only, default 0); fp (3n).
+  outputs  tau_flex (3) about c0, tau_split (3) = tau_flex - D wdot - w x D w (for an attitude simulator using
+           J - D), F_int, T_int (3, loads of the appendage on the base, torque about O_g), a_O (3), cm_shift (3),
+           eta, eta_dot, q, q_dot, elastic_energy.
+mode "base" (prescribed base motion, spec mode B). State: (eta, eta_dot).
+  inputs   a_O (3, inertial acceleration of O_g in body axes), omega (3), omega_dot (3), fp (3n).
+  outputs  F_int, T_int, F_rig, T_rig, F_flex, T_flex (3), eta, eta_dot, q, q_dot, elastic_energy.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from cosim.subsim import InputFunction, ModelError, Port, Subsim
+from subsims.flexbody.appendage import appendage_accelerations, inertia_split
+from subsims.flexbody.config import FlexSetup, build
+from subsims.flexbody.model import Loads, integrate, integrate_samples
+from subsims.flexbody.outputs import appendage_outputs, free_outputs
+
+
+def _ports(setup: FlexSetup) -> tuple[dict[str, Port], dict[str, Port]]:
+    u = setup.units
+    L, F = u["length"], u["force"]
+    TQ, E = f"{F}*{L}", f"{F}*{L}"
+    n3, t = 3 * setup.model.n, setup.model.t
+    sq = f"{u['mass']}^0.5*{L}"  # eta: q = Phi eta with Phi^T M Phi = E
+    modal = {"eta": Port(t, sq, "modal coordinates (basis-dependent)"), "eta_dot": Port(t, f"{sq}/s", "modal rates")}
+    modal = modal if t else {}
+    defl = {
+        "q": Port(n3, L, "particle deflections q_i, body axes, particle-major"),
+        "q_dot": Port(n3, f"{L}/s", "particle deflection rates"),
+        "elastic_energy": Port(1, E, "1/2 eta^T Omega^2 eta"),
+    }
+    fp = {"fp": Port(n3, F, "external force on each particle, body axes, particle-major")}
+    w_in = {
+        "omega": Port(3, "rad/s", "base angular velocity, body axes"),
+        "omega_dot": Port(3, "rad/s^2", "base angular acceleration, body axes"),
+    }
+    if setup.mode == "free":
+        inputs = {
+            "f0": Port(3, F, "force on the base at O_g, body axes"),
+            "tau0": Port(3, TQ, "torque on the base about O_g, body axes"),
+            **fp,
+        }
+        outputs = {
+            "R": Port(3, L, "position of O_g, inertial"),
+            "euler123": Port(3, "rad", "report 1-2-3 Euler angles (7-1), continuous branch"),
+            "euler_zyx": Port(3, "rad", "Nixon z-y-x angles (phi_x, phi_y, phi_z) of the same attitude"),
+            "quat": Port(4, "", "attitude quaternion body->inertial (w, x, y, z)"),
+            "V": Port(3, f"{L}/s", "inertial velocity of O_g, body axes"),
+            "omega": Port(3, "rad/s", "body angular velocity, body axes"),
+            "omega_dot": Port(3, "rad/s^2", "body angular acceleration"),
+            **modal,
+            **defl,
+            "kinetic_energy": Port(1, E, "T = 1/2 U^T A U"),
+            "p_I": Port(3, f"{u['mass']}*{L}/s", "linear momentum, inertial"),
+            "H_O": Port(3, f"{u['mass']}*{L}^2/s", "angular momentum about the inertial origin, inertial"),
+        }
+    elif setup.mode == "attitude":
+        inputs = {**w_in, "f_bus": Port(3, F, "external force on the base, body axes"), **fp}
+        outputs = {
+            "tau_flex": Port(3, TQ, "flexible torque about the composite mass centre c0"),
+            "tau_split": Port(3, TQ, "tau_flex - D omega_dot - omega x D omega (attitude inertia J - D)"),
+            "F_int": Port(3, F, "force of the appendage on the base"),
+            "T_int": Port(3, TQ, "torque of the appendage on the base about O_g"),
+            "a_O": Port(3, f"{L}/s^2", "inertial acceleration of O_g, body axes"),
+            "cm_shift": Port(3, L, "mass-centre offset from c0, mc_1 / m"),
+            **modal,
+            **defl,
+        }
+    else:
+        inputs = {"a_O": Port(3, f"{L}/s^2", "inertial acceleration of O_g, body axes"), **w_in, **fp}
+        outputs = {
+            name: Port(3, F if name.startswith("F") else TQ, doc)
+            for name, doc in (
+                ("F_int", "force of the appendage on the base"),
+                ("T_int", "torque of the appendage on the base about O_g"),
+                ("F_rig", "F_int of the rigid undeformed appendage"),
+                ("T_rig", "T_int of the rigid undeformed appendage"),
+                ("F_flex", "F_int - F_rig"),
+                ("T_flex", "T_int - T_rig"),
+            )
+        }
+        outputs.update(modal)
+        outputs.update(defl)
+    return inputs, outputs
+
+
+class FlexBody(Subsim):
+    """Flexible spacecraft of Storch & Gates (CSDL-R-1582): rigid base + particle appendage, t modes.
+
+    Parameters: see ``subsims.flexbody.vehicle`` (defaults: the report's appendix-B vehicle, spec §2.4 K).
+    """
+
+    name = "flexbody"
+    inputs, outputs = _ports(build({}))
+
+    def initial_state(self, params: Mapping[str, Any]) -> np.ndarray:
+        setup = build(params)
+        if setup.mode != "free" and setup.model.t == 0:
+            raise ValueError(f"parameter 'n_modes' must be >= 1 in mode {setup.mode!r}")
+        self.setup = setup
+        self.model = setup.model
+        self.split = inertia_split(setup.model)
+        self.inputs, self.outputs = _ports(setup)
+        if setup.mode == "free":
+            return setup.Y0.copy()
+        return np.concatenate([setup.eta0, setup.eta_dot0])
+
+    # -- input access -------------------------------------------------------------------------------
+
+    def _read(self, u: InputFunction, t: float) -> dict[str, np.ndarray]:
+        d = u(t)
+        out = {}
+        for name, port in self.inputs.items():
+            v = d.get(name)
+            out[name] = np.zeros(port.size) if v is None else np.asarray(v, dtype=np.float64).reshape(port.size)
+        out["fp"] = out["fp"].reshape(self.model.n, 3)
+        return out
+
+    # -- advance --------------------------------------------------------------------------------------
+
+    def advance(
+        self, state: np.ndarray, times: np.ndarray, u: InputFunction
+    ) -> tuple[Mapping[str, np.ndarray], np.ndarray]:
+        times = np.asarray(times, dtype=np.float64)
+        y0 = np.array(state, dtype=np.float64)
+        try:
+            if self.setup.mode == "free":
+                return self._advance_free(y0, times, u)
+            return self._advance_appendage(y0, times, u)
+        except np.linalg.LinAlgError as exc:
+            raise ModelError(f"flexbody: {exc}") from exc
+
+    def _advance_free(self, y0: np.ndarray, times: np.ndarray, u: InputFunction) -> tuple[dict, np.ndarray]:
+        model = self.model
+
+        def loads(tt: float, y: np.ndarray | None = None) -> Loads:
+            d = self._read(u, tt)
+            return d["f0"], d["tau0"], d["fp"]
+
+        ys = integrate(model, y0, times, loads, self.setup.h)
+        if not np.all(np.isfinite(ys)):
+            raise ModelError("flexbody: state became non-finite")
+        out = free_outputs(model, times, ys, loads)
+        return {name: out[name] for name in self.outputs}, ys[-1].copy()
+
+    def _advance_appendage(self, y0: np.ndarray, times: np.ndarray, u: InputFunction) -> tuple[dict, np.ndarray]:
+        model, t = self.model, self.model.t
+        mode_c = self.setup.mode == "attitude"
+
+        def solve(tt: float, y: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray]:
+            d = self._read(u, tt)
+            a_O, eta_dd = appendage_accelerations(
+                model, y[:t], y[t:], d["omega"], d["omega_dot"], d["fp"],
+                f_bus=d["f_bus"] if mode_c else None, a_O=None if mode_c else d["a_O"],
+            )
+            return d, a_O, eta_dd
+
+        ys = integrate_samples(lambda tt, y: np.concatenate([y[t:], solve(tt, y)[2]]), y0, times, self.setup.h)
+        if not np.all(np.isfinite(ys)):
+            raise ModelError("flexbody: state became non-finite")
+        out = appendage_outputs(model, times, ys, solve, self.split["D"])
+        return {name: out[name] for name in self.outputs}, ys[-1].copy()
