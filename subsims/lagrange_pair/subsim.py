@@ -73,7 +73,10 @@ class LagrangePair(Subsim):
 
         def loads(t: float) -> np.ndarray:
             v = u(t)
-            return np.concatenate([np.asarray(v[k], dtype=np.float64).reshape(3) for k in INPUT_PORTS])
+            fx = np.concatenate([np.asarray(v[k], dtype=np.float64).reshape(3) for k in INPUT_PORTS])
+            if not np.all(np.isfinite(fx)):
+                raise FloatingPointError(f"extra loads at t={t!r} are not finite: {fx.tolist()}")
+            return fx
 
         try:
             samples, x1 = model.integrate(self.model, x0, np.asarray(times, dtype=np.float64), loads, self.dt,
