@@ -8,6 +8,7 @@ the paper's defaults (spec §7). ``transfer`` are the params of ``transforms.tor
 
 from __future__ import annotations
 
+import copy
 from typing import Any
 
 # spec §7.8: circular 300 km orbit, 30 deg inclination, start at the northernmost point; spec §7.2 mass
@@ -25,16 +26,17 @@ TRANSFER: dict[str, Any] = {"r_cm": [1.0, 0.1, 0.1], "physical": False}
 
 _FULL = {"a0": 1000.0, "a1": 100.0, "b0": 1000.0, "b1": 100.0, "c0": 1000.0, "c1": 100.0}
 
-CASES: dict[str, dict[str, Any]] = {
-    # case 1: full inertial three-axis control (attitude.f as listed)
-    "case1": {"orbit": dict(ORBIT), "attitude": {**_ATTITUDE, **_FULL}, "aero": dict(AERO),
-              "transfer": dict(TRANSFER)},
-    # case 2: two-axis control, z gains zero
-    "case2": {"orbit": dict(ORBIT), "attitude": {**_ATTITUDE, **_FULL, "c0": 0.0, "c1": 0.0},
-              "aero": dict(AERO), "transfer": dict(TRANSFER)},
-    # case 3: no control, tumble (rku.f as listed: control=0)
-    "case3": {"orbit": dict(ORBIT), "attitude": {**_ATTITUDE, **{g: 0.0 for g in _FULL}},
-              "aero": dict(AERO), "transfer": dict(TRANSFER)},
+
+
+def _case(**attitude_gains: float) -> dict[str, dict[str, Any]]:
+    return copy.deepcopy({"orbit": ORBIT, "attitude": {**_ATTITUDE, **attitude_gains}, "aero": AERO,
+                          "transfer": TRANSFER})
+
+
+CASES: dict[str, dict[str, dict[str, Any]]] = {
+    "case1": _case(**_FULL),  # full inertial three-axis control (attitude.f as listed)
+    "case2": _case(**{**_FULL, "c0": 0.0, "c1": 0.0}),  # two-axis control: z gains zero
+    "case3": _case(**{g: 0.0 for g in _FULL}),  # no control, tumble (rku.f as listed: control=0)
 }
 
 # spec §9.1 / §3.1: ndp 5 samples per interval incl. both ends, dtmaj 0.4 s -> delt 0.1 s; 60,000 s runs

@@ -13,7 +13,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from subsims.attitude.model import dcm321_batch
-from subsims.satellite.constants import R_CM
+from subsims.satellite.constants import R_CM, REARTH_KM
 
 
 def _rows(x: np.ndarray, what: str) -> np.ndarray:
@@ -58,3 +58,16 @@ def torque_to_cm(torque: np.ndarray, force: np.ndarray, r_cm: Sequence[float] = 
         raise ValueError(f"parameter 'r_cm' must be 3 numbers, got {r_cm!r}")
     rxf = np.cross(np.broadcast_to(r, f.shape), f)
     return t - rxf if physical else t + rxf
+
+
+def limit_angles(phi: np.ndarray) -> np.ndarray:
+    """Output range limiting (rku_out: dcm321 then dcmang321, all three angles jointly): the unlimited
+    state angles -> phi_x, phi_z in (-pi, pi], phi_y in [-pi/2, pi/2], same attitude. rad -> rad."""
+    a = dcm321_batch(_rows(phi, "phi"))
+    phi_y = np.arctan2(-a[:, 0, 2], np.hypot(a[:, 0, 0], a[:, 0, 1]))
+    return np.column_stack([np.arctan2(a[:, 1, 2], a[:, 2, 2]), phi_y, np.arctan2(a[:, 0, 1], a[:, 0, 0])])
+
+
+def altitude_km(radius: np.ndarray, rearth_km: float = REARTH_KM) -> np.ndarray:
+    """rfc_out/rku_out altitude: |R|/1000 - rearth (km), shape (n, 1)."""
+    return np.linalg.norm(_rows(radius, "radius"), axis=1, keepdims=True) / 1000.0 - rearth_km
