@@ -1,10 +1,139 @@
-"""The ``cosim`` command line (subcommands are added as the coupler lands)."""
+"""The ``cosim`` command: run and describe scenarios, serve a subsim, plot results."""
 
 from __future__ import annotations
 
+import argparse
 import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from cosim.coupler.couplings import SignalRef, feedback_weight
+from cosim.coupler.relaxation import METHODS, Coordinator, NotConverged
+from cosim.protocol.errors import SubsimError
+from cosim.runner import open_session, run_scenario
+from cosim.scenario import ScenarioError, load
 
 
-def main(argv: list[str] | None = None) -> int:
-    print("cosim: no subcommands yet", file=sys.stderr)
-    return 2
+def _run(args: argparse.Namespace) -> int:
+    scenario = load(args.scenario)
+    if args.method == "unified":
+        from cosim.unified import run_unified
+
+        report = run_unified(scenario, stop=args.stop, output=args.output)
+    else:
+        report = run_scenario(scenario, method=args.method, stop=args.stop, output=args.output,
+                              inprocess=args.inprocess, listen=args.listen, progress=not args.quiet)
+    s = report.summary
+    hist = ", ".join(f"{k} stages: {v}" for k, v in sorted(s.stages.items()))
+    print(f"{scenario.name} ({report.method}): {s.intervals} intervals to t = {s.t_end:.6g} in {s.wall_time:.2f} s"
+          f"{f' ({hist})' if hist else ''}")
+    if report.method == "distributed":
+        print(f"order: {' -> '.join(report.order)}; feedback: {'; '.join(report.feedback) or 'none'}")
+    print(f"results: {report.output}\ndiagnostics: {report.diagnostics}")
+    return 0
+
+
+def _describe(args: argparse.Namespace) -> int:
+    scenario = load(args.scenario)
+    print(f"{scenario.name}: {scenario.description}".rstrip(": "))
+    print(f"time: {scenario.start:g} to {scenario.stop:g}")
+    session = open_session(scenario, inprocess=not args.launch, log=lambda m: print(m, file=sys.stderr))
+    try:
+        print("subsims:")
+        for name, d in session.descriptions.items():
+            ins = ", ".join(f"{p}({port.size}{' ' + port.unit if port.unit else ''})" for p, port in d.inputs.items())
+            outs = ", ".join(f"{p}({port.size}{' ' + port.unit if port.unit else ''})"
+                             for p, port in d.outputs.items())
+            kind = "external" if scenario.subsims[name].external else scenario.subsims[name].model
+            print(f"  {name} [{kind}]{' algebraic' if d.algebraic else ''}\n    in:  {ins or '-'}\n    out: {outs}")
+        print("couplings:")
+        for c in scenario.couplings:
+            extra = f" via {c.transform_name}" if c.transform_name != "identity" else ""
+            print(f"  {c}{extra}")
+        coupled = {str(c.target) for c in scenario.couplings}
+        loose = [f"{n}.{p}" for n, d in session.descriptions.items() for p in d.inputs if f"{n}.{p}" not in coupled]
+        if loose:
+            print(f"uncoupled inputs (held at zero): {', '.join(loose)}")
+        for method in METHODS:
+            st = scenario.settings_for(method)
+            co = Coordinator(session.handles, scenario.couplings, st, session.descriptions)
+            sizes = {SignalRef(s, p): port.size for s, d in session.descriptions.items()
+                     for p, port in d.inputs.items()}
+            line = f"{method}: H = {st.interval:g}, {st.samples} samples, tol {st.tol.rel:g}/{st.tol.abs:g}, " \
+                   f"first guess {st.first_guess}, interp {st.interp}"
+            print(line)
+            if method == "distributed":
+                given = "given" if st.order is not None else "derived"
+                print(f"  order ({given}): {' -> '.join(co.order)}")
+                print(f"  feedback edges ({feedback_weight(co.order, scenario.couplings, sizes)} scalar signals): "
+                      f"{'; '.join(map(str, co.feedback)) or 'none'}")
+    finally:
+        session.close()
+    return 0
+
+
+def _serve(args: argparse.Namespace) -> int:
+    from cosim.serve import main as serve
+
+    return serve([args.model, *args.rest])
+
+
+def _plot(args: argparse.Namespace) -> int:
+    from cosim.plot import plot_command
+
+    return plot_command(args)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="cosim", description=__doc__)
+    sub = p.add_subparsers(dest="command", required=True)
+
+    r = sub.add_parser("run", help="run a scenario")
+    r.add_argument("scenario", type=Path)
+    r.add_argument("--stop", type=float, help="stop time (default: the scenario's)")
+    r.add_argument("--output", type=Path, help="result file, .csv or .npz (default: results/<name>-<method>.csv)")
+    r.add_argument("--method", choices=[*METHODS, "unified"], help="coupling method (default: the scenario's)")
+    r.add_argument("--inprocess", action="store_true", help="run every subsim in this process (no Zenoh)")
+    r.add_argument("--listen", default="tcp/127.0.0.1:0",
+                   help="router endpoint (default: loopback, free port; use tcp/0.0.0.0:7447 for other machines)")
+    r.add_argument("--quiet", action="store_true", help="no progress display")
+    r.set_defaults(fn=_run)
+
+    d = sub.add_parser("describe", help="print subsims, couplings, execution order and feedback edges")
+    d.add_argument("scenario", type=Path)
+    d.add_argument("--launch", action="store_true", help="ask real processes (default: in-process models)")
+    d.set_defaults(fn=_describe)
+
+    s = sub.add_parser("serve", help="serve a subsim class as a process (see python -m cosim.serve)")
+    s.add_argument("model", help="package.module:Class")
+    s.add_argument("rest", nargs=argparse.REMAINDER, help="--connect ENDPOINT --run RUN [--name NAME]")
+    s.set_defaults(fn=_serve)
+
+    pl = sub.add_parser("plot", help="plot result files to PNG")
+    pl.add_argument("results", nargs="+", type=Path, help="result files (.csv/.npz)")
+    pl.add_argument("--out", type=Path, default=Path("plots"), help="directory for the PNGs")
+    pl.add_argument("--signals", nargs="*", help="columns or signal prefixes to plot (default: all)")
+    pl.set_defaults(fn=_plot)
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return args.fn(args)
+    except ScenarioError as exc:
+        print(f"cosim: {exc}", file=sys.stderr)
+        return 2
+    except NotConverged as exc:
+        print(f"cosim: run stopped: {exc}", file=sys.stderr)
+        return 1
+    except SubsimError as exc:
+        print(f"cosim: run stopped: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("cosim: interrupted; results up to the last committed interval are kept", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -16,8 +16,12 @@ from cosim.handles import RemoteHandle
 from cosim.protocol.bus import coordinator_alive_key, new_run_id, open_router
 
 
-def subsim_command(module: str, endpoint: str, run: str, name: str, python: str = sys.executable) -> list[str]:
-    return [python, "-m", module, "--connect", endpoint, "--run", run, "--name", name]
+def subsim_command(
+    module: str, endpoint: str, run: str, name: str, model: str | None = None, python: str = sys.executable
+) -> list[str]:
+    """``python -m module`` for a subsim package, or ``python -m cosim.serve model`` for any class."""
+    head = [python, "-m", "cosim.serve", model] if model else [python, "-m", module]
+    return [*head, "--connect", endpoint, "--run", run, "--name", name]
 
 
 @dataclass
@@ -77,13 +81,19 @@ class Bus:
         return handle
 
     def spawn(
-        self, module: str, name: str, timeout: float = 60.0, wait: float = 20.0, quiet: bool = False
+        self,
+        module: str,
+        name: str,
+        timeout: float = 60.0,
+        wait: float = 20.0,
+        quiet: bool = False,
+        model: str | None = None,
     ) -> SubsimProcess:
-        """Start ``python -m module`` as subsim ``name`` and wait until it answers."""
+        """Start ``python -m module`` (or ``cosim.serve model``) as subsim ``name``; wait until it answers."""
         env = dict(os.environ)
         env.setdefault("PYTHONUNBUFFERED", "1")
         popen = subprocess.Popen(
-            subsim_command(module, self.endpoint, self.run, name),
+            subsim_command(module, self.endpoint, self.run, name, model),
             env=env,
             stdout=subprocess.DEVNULL if quiet else None,
             stderr=subprocess.DEVNULL if quiet else None,

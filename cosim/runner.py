@@ -1,0 +1,158 @@
+"""Run a scenario: open the bus, launch or attach subsims, configure, couple, write results.
+
+The I/O shell around the sans-IO :class:`~cosim.coupler.relaxation.Coordinator`.
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from cosim.coupler.couplings import SignalRef, check_couplings
+from cosim.coupler.relaxation import Coordinator, Interval, RunSummary
+from cosim.handles import Description, InProcessHandle, SubsimHandle
+from cosim.launch import Bus, subsim_command
+from cosim.progress import Progress
+from cosim.protocol.errors import SubsimError
+from cosim.results import ResultWriter, diag_path
+from cosim.scenario import Scenario, ScenarioError
+
+Log = Callable[[str], None]
+
+
+def _stderr(msg: str) -> None:
+    print(msg, file=sys.stderr, flush=True)
+
+
+@dataclass
+class RunReport:
+    method: str
+    summary: RunSummary
+    output: Path
+    diagnostics: Path
+    order: list[str]
+    feedback: list[str]
+    extra: dict = field(default_factory=dict)
+
+
+@dataclass
+class Session:
+    """Handles to a scenario's subsims, configured, plus the bus they live on (None in-process)."""
+
+    scenario: Scenario
+    handles: dict[str, SubsimHandle]
+    descriptions: dict[str, Description]
+    bus: Bus | None = None
+
+    def close(self) -> None:
+        for h in self.handles.values():
+            h.close()
+        if self.bus is not None:
+            self.bus.close()
+
+
+def open_session(
+    scenario: Scenario,
+    inprocess: bool = False,
+    listen: str = "tcp/127.0.0.1:0",
+    external_wait: float = 300.0,
+    log: Log = _stderr,
+    timeout: float = 120.0,
+) -> Session:
+    """Launch (or attach to) and configure every subsim. The caller must ``close()`` the session."""
+    handles: dict[str, SubsimHandle] = {}
+    bus = None
+    if inprocess:
+        for name, spec in scenario.subsims.items():
+            if spec.external or spec.model is None:
+                raise ScenarioError(f"{scenario.path}: [subsims.{name}] is external: cannot run it --inprocess")
+            handles[name] = InProcessHandle(spec.model_class()(), name)
+    else:
+        bus = Bus.open(listen)
+    session = Session(scenario, handles, {}, bus)
+    try:
+        if bus is not None:
+            for name, spec in scenario.subsims.items():
+                if spec.external:
+                    cmd = subsim_command("<your.subsim.module>", bus.endpoint, bus.run, name, spec.model)
+                    log(f"cosim: waiting up to {external_wait:g} s for external subsim {name!r}; start it with:\n"
+                        f"  {' '.join(['python', *cmd[1:]])}\n"
+                        f"  (from another machine: run cosim with --listen tcp/0.0.0.0:<port> and use this "
+                        f"machine's address)")
+                    handles[name] = bus.attach(name, timeout=timeout, wait=external_wait)
+                else:
+                    handles[name] = bus.spawn("", name, timeout=timeout, model=spec.model).handle
+        for name, spec in scenario.subsims.items():
+            try:
+                session.descriptions[name] = handles[name].configure(spec.params, t0=scenario.start)
+            except SubsimError as exc:
+                raise ScenarioError(f"{scenario.path}: [subsims.{name}.params] {exc.message}") from None
+        for i in range(len(scenario.couplings)):
+            inputs = {n: d.inputs for n, d in session.descriptions.items()}
+            outputs = {n: d.outputs for n, d in session.descriptions.items()}
+            try:
+                check_couplings(scenario.couplings[: i + 1], inputs, outputs)
+            except ValueError as exc:
+                raise ScenarioError(f"{scenario.path}: [couplings[{i}]] {exc}") from None
+    except BaseException:
+        session.close()
+        raise
+    return session
+
+
+def output_signals(scenario: Scenario, descriptions: dict[str, Description]) -> list[tuple[SignalRef, int]]:
+    if scenario.output_signals is None:
+        return [(SignalRef(n, p), port.size) for n, d in descriptions.items() for p, port in d.outputs.items()]
+    out = []
+    for i, text in enumerate(scenario.output_signals):
+        try:
+            ref = SignalRef.parse(text)
+            out.append((ref, descriptions[ref.subsim].outputs[ref.port].size))
+        except (ValueError, KeyError):
+            msg = f"{scenario.path}: [output.signals[{i}]] {text!r} is not an output of any subsim"
+            raise ScenarioError(msg) from None
+    return out
+
+
+def default_output(scenario: Scenario, method: str) -> Path:
+    return scenario.output_path or Path.cwd() / "results" / f"{scenario.name}-{method}.csv"
+
+
+def run_scenario(
+    scenario: Scenario,
+    method: str | None = None,
+    stop: float | None = None,
+    output: Path | None = None,
+    inprocess: bool = False,
+    listen: str = "tcp/127.0.0.1:0",
+    progress: bool = True,
+    log: Log = _stderr,
+    on_interval: Callable[[Interval], None] | None = None,
+) -> RunReport:
+    method = method or scenario.default_method
+    settings = scenario.settings_for(method)
+    stop = scenario.stop if stop is None else stop
+    output = output or default_output(scenario, method)
+    session = open_session(scenario, inprocess=inprocess, listen=listen, log=log)
+    try:
+        coordinator = Coordinator(session.handles, scenario.couplings, settings, session.descriptions)
+        writer = ResultWriter(output, output_signals(scenario, session.descriptions))
+        bar = Progress(scenario.start, stop, enabled=progress)
+
+        def each(interval: Interval) -> None:
+            writer.write(interval)
+            bar.update(interval)
+            if on_interval is not None:
+                on_interval(interval)
+
+        try:
+            summary = coordinator.run(scenario.start, stop, each)
+        finally:
+            writer.close()
+            bar.done()
+        return RunReport(method, summary, output, diag_path(output), coordinator.order,
+                         [str(c) for c in coordinator.feedback])
+    finally:
+        session.close()

@@ -1,0 +1,30 @@
+"""Serve any subsim class as a process: ``python -m cosim.serve package.module:Class --connect EP --run RUN``.
+
+This is what ``cosim run`` launches, and what it tells you to start on another machine for an
+external subsim. (Shipped subsims also have their own ``python -m subsims.<name>`` form.)
+"""
+
+from __future__ import annotations
+
+import sys
+
+from cosim.process import main as serve_model
+from cosim.scenario import load_model
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if not argv or argv[0].startswith("-"):
+        print("usage: python -m cosim.serve package.module:Class --connect ENDPOINT --run RUN [--name NAME]",
+              file=sys.stderr)
+        return 2
+    try:
+        cls = load_model(argv[0])
+    except ValueError as exc:
+        print(f"cosim.serve: {exc}", file=sys.stderr)
+        return 2
+    return serve_model(cls, argv[1:])
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
