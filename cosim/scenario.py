@@ -173,22 +173,25 @@ def parse(raw: Mapping[str, Any], path: Path) -> Scenario:
         raise fail("coupling", "must be a table")
     base = {k: v for k, v in coupling_table.items() if k not in METHODS}
     unknown(base, SETTING_KEYS, "coupling")
+    def build(table: Mapping[str, Any], method: str, where: str) -> Settings:
+        merged = dict(table)
+        try:
+            tol = Tolerance(merged.pop("tol", 1e-10), merged.pop("res", 1e-12))
+            order = merged.get("order")
+            if order is not None and sorted(order) != sorted(subsims):
+                raise ValueError(f"order {order} must list every subsim once: {sorted(subsims)}")
+            return Settings(tol=tol, tolerances=tolerances, **{**merged, "method": method})
+        except (ValueError, TypeError) as exc:
+            raise fail(where, str(exc)) from None
+
+    build(base, "centralized", "coupling")  # the shared table must be valid on its own
     settings = {}
     for method in METHODS:
         over = coupling_table.get(method, {})
         if not isinstance(over, dict):
             raise fail(f"coupling.{method}", "must be a table")
         unknown(over, SETTING_KEYS - {"method"}, f"coupling.{method}")
-        merged = {**base, **over, "method": method}
-        where = f"coupling.{method}" if over else "coupling"
-        try:
-            tol = Tolerance(merged.pop("tol", 1e-10), merged.pop("res", 1e-12))
-            order = merged.get("order")
-            if order is not None and sorted(order) != sorted(subsims):
-                raise ValueError(f"order {order} must list every subsim once: {sorted(subsims)}")
-            settings[method] = Settings(tol=tol, tolerances=tolerances, **merged)
-        except (ValueError, TypeError) as exc:
-            raise fail(where, str(exc)) from None
+        settings[method] = build({**base, **over}, method, f"coupling.{method}")
     default_method = base.get("method", "centralized")
     if default_method not in METHODS:
         raise fail("coupling.method", f"must be one of {METHODS}, got {default_method!r}")

@@ -1,0 +1,100 @@
+"""Scenario loading: every mistake is reported with the file and the offending key."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from cosim.runner import open_session
+from cosim.scenario import ScenarioError, load
+
+GOOD = """
+stop = 1.0
+[coupling]
+method = "distributed"
+interval = 0.1
+samples = 5
+[coupling.centralized]
+tol = 1e-12
+[subsims.a]
+model = "subsims.integrator.subsim:Integrator"
+params = { size = 2 }
+[subsims.b]
+model = "subsims.integrator.subsim:Integrator"
+[[couplings]]
+to = "a.u"
+from = "a.y"
+transform = "gain"
+params = { k = -1.0 }
+[[couplings]]
+to = "b.u"
+from = ["a.y"]
+transform = "linear"
+params = { gains = [[[1.0, 0.0]]] }
+"""
+
+
+def write(tmp_path: Path, text: str) -> Path:
+    p = tmp_path / "s.toml"
+    p.write_text(text)
+    return p
+
+
+def test_good_scenario_loads_with_per_method_settings(tmp_path: Path) -> None:
+    sc = load(write(tmp_path, GOOD))
+    assert sc.default_method == "distributed"
+    assert sc.settings_for("centralized").tol.rel == 1e-12
+    assert sc.settings_for("distributed").tol.rel == 1e-10
+    assert sc.settings_for().interval == 0.1 and sc.settings_for().samples == 5
+    assert [str(c) for c in sc.couplings] == ["a.y -> a.u", "a.y -> b.u"]
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "key", "words"),
+    [
+        ('to = "b.u"', 'to = "c.u"', "couplings[1]", "unknown subsim 'c'"),
+        ('from = ["a.y"]', 'from = "a"', "couplings[1]", "subsim.port"),
+        ("tol = 1e-12", "tol = -1.0", "coupling.centralized", "tolerance rel"),
+        ("samples = 5", "samples = 1", "coupling", "samples"),
+        ('method = "distributed"', 'method = "jacobi"', "coupling.method", "jacobi"),
+        ("interval = 0.1", "interval = 0.1\nspeed = 3", "coupling", "unknown key(s) ['speed']"),
+        ('model = "subsims.integrator.subsim:Integrator"\nparams', 'model = "subsims.nothere:X"\nparams',
+         "subsims.a.model", "not found"),
+        ('transform = "gain"', 'transform = "warp"', "couplings[0]", "unknown transform 'warp'"),
+        ("stop = 1.0", "stop = -1.0", "stop", "after start"),
+        ('[subsims.b]\nmodel = "subsims.integrator.subsim:Integrator"', "[subsims.b]", "subsims.b", "needs model"),
+    ],
+)
+def test_load_errors_name_the_key(tmp_path: Path, old: str, new: str, key: str, words: str) -> None:
+    assert old in GOOD
+    with pytest.raises(ScenarioError) as err:
+        load(write(tmp_path, GOOD.replace(old, new, 1)))
+    assert f"[{key}]" in str(err.value) and words in str(err.value) and "s.toml" in str(err.value)
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "key", "words"),
+    [
+        ('from = ["a.y"]', 'from = ["a.z"]', "couplings[1]", "has no output 'z'"),
+        ('to = "b.u"', 'to = "b.w"', "couplings[1]", "has no input 'w'"),
+        ('from = ["a.y"]\ntransform = "linear"\nparams = { gains = [[[1.0, 0.0]]] }', 'from = "a.y"',
+         "couplings[1]", "size mismatch"),
+        ("params = { size = 2 }", "params = { size = 2, y0 = [1.0] }", "subsims.a.params", "y0"),
+    ],
+)
+def test_signal_errors_found_when_ports_are_known_name_the_key(
+    tmp_path: Path, old: str, new: str, key: str, words: str
+) -> None:
+    assert old in GOOD
+    sc = load(write(tmp_path, GOOD.replace(old, new, 1)))
+    with pytest.raises(ScenarioError) as err:
+        open_session(sc, inprocess=True).close()
+    assert f"[{key}]" in str(err.value) and words in str(err.value)
+
+
+def test_missing_file_and_bad_toml(tmp_path: Path) -> None:
+    with pytest.raises(ScenarioError, match="not found"):
+        load(tmp_path / "nope.toml")
+    with pytest.raises(ScenarioError, match="not valid TOML"):
+        load(write(tmp_path, "stop = = 1"))
