@@ -227,7 +227,7 @@ class Coordinator:
                     return Interval(times, outputs, inputs, stage + 1, history)
             previous = flat
             inputs = {str(c.target): self._evaluate(c, outputs, n) for c in self.couplings}
-        raise NotConverged(times[0], times[-1], s.max_stages, result.failing, history)
+        raise NotConverged(float(times[0]), float(times[-1]), s.max_stages, result.failing, history)
 
     def _distributed(self, times: np.ndarray) -> Interval:
         n, s = times.size, self.settings
@@ -254,4 +254,4 @@ class Coordinator:
                 if result.converged:
                     return Interval(times, outputs, inputs, stage + 1, history)
             fed_back = new
-        raise NotConverged(times[0], times[-1], s.max_stages, result.failing, history)
+        raise NotConverged(float(times[0]), float(times[-1]), s.max_stages, result.failing, history)

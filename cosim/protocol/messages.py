@@ -115,6 +115,19 @@ def _to_wire(value: Any) -> Any:
     return value
 
 
+def _plain(value: Any) -> Any:
+    """Parameters are plain values (see ``t_params``): arrays become nested lists, numpy scalars numbers."""
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    return value
+
+
 def _check_version(msg: dict) -> None:
     v = msg.get("v")
     if isinstance(v, bool) or not isinstance(v, int):
@@ -124,7 +137,9 @@ def _check_version(msg: dict) -> None:
 
 
 def encode_request(cmd: str, args: dict[str, Any] | None = None) -> bytes:
-    return pack({"v": PROTOCOL_VERSION, "cmd": cmd, "args": _to_wire(args or {})})
+    fields = REQUESTS.get(cmd, {})
+    wire = {k: _plain(v) if fields.get(k, (None,))[0] is t_params else _to_wire(v) for k, v in (args or {}).items()}
+    return pack({"v": PROTOCOL_VERSION, "cmd": cmd, "args": wire})
 
 
 def decode_request(payload: bytes) -> Request:

@@ -1,0 +1,147 @@
+"""The ``cosim`` command as a user runs it: real processes, exit codes, files, cleanup."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from cosim.results import read_results
+
+ROOT = Path(__file__).parents[1]
+OSCILLATOR = ROOT / "scenarios" / "oscillator.toml"
+COSIM = [sys.executable, "-m", "cosim.cli"]
+
+
+def serving(marker: str) -> list[int]:
+    """Pids of live subsim processes whose command line contains ``marker``."""
+    out = subprocess.run(["ps", "-ww", "-eo", "pid,args"], capture_output=True, text=True).stdout
+    return [int(line.split()[0]) for line in out.splitlines()[1:] if "--run" in line and marker in line]
+
+
+@pytest.fixture
+def popen_cleanup() -> Iterator[list[subprocess.Popen]]:
+    procs: list[subprocess.Popen] = []
+    yield procs
+    for p in procs:
+        if p.poll() is None:
+            p.kill()
+        p.wait()
+
+
+def test_run_writes_results_and_diagnostics_and_leaves_no_process(tmp_path: Path) -> None:
+    out = tmp_path / "osc.csv"
+    done = subprocess.run([*COSIM, "run", str(OSCILLATOR), "--stop", "0.2", "--output", str(out)],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    cols, data = read_results(out)
+    assert cols == ["time", "mass1.u[0]", "mass1.v[0]", "mass2.u[0]", "mass2.v[0]"]
+    assert data[0, 0] == 0.0 and data[-1, 0] == pytest.approx(0.2) and data[0, 1] == 1.0
+    diag = (tmp_path / "osc.diag.csv").read_text().splitlines()
+    assert diag[0] == "interval,t0,t1,stages,largest_residual,wall_time_s,halvings" and len(diag) == 1 + 4
+    assert "order: mass1 -> mass2" in done.stdout and str(out) in done.stdout
+    assert "100.0%" in done.stderr  # progress (non-terminal form)
+    assert serving(str(out)) == [] and serving("subsims.oscillator") == []
+
+
+def test_npz_output_by_suffix_in_process(tmp_path: Path) -> None:
+    out = tmp_path / "osc.npz"
+    done = subprocess.run([*COSIM, "run", str(OSCILLATOR), "--stop", "0.1", "--output", str(out), "--inprocess",
+                           "--method", "centralized", "--quiet"], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    cols, data = read_results(out)
+    assert cols[0] == "time" and data.shape == (9, 5) and done.stderr == ""  # 2 intervals x 4 samples + the end
+
+
+def test_ctrl_c_keeps_committed_results_and_cleans_up(tmp_path: Path, popen_cleanup: list) -> None:
+    out = tmp_path / "long.csv"
+    proc = subprocess.Popen([*COSIM, "run", str(OSCILLATOR), "--stop", "1000", "--output", str(out)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    popen_cleanup.append(proc)
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and (not out.exists() or len(out.read_text().splitlines()) < 50):
+        time.sleep(0.1)
+    children = serving("subsims.oscillator")
+    assert len(children) >= 2
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 130 and "interrupted" in err
+    _, data = read_results(out)
+    assert data.shape[0] >= 50 and data[-1, 0] < 1000
+    time.sleep(0.5)
+    assert [p for p in children if _alive(p)] == []
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    return True
+
+
+def test_non_convergence_stops_with_a_named_interval_and_signals(tmp_path: Path) -> None:
+    sc = tmp_path / "tight.toml"
+    sc.write_text(OSCILLATOR.read_text().replace("max_stages = 50", "max_stages = 2"))
+    done = subprocess.run([*COSIM, "run", str(sc), "--inprocess", "--output", str(tmp_path / "x.csv")],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 1
+    assert "interval [0.0, 0.05] did not converge in 2 stages" in done.stderr
+    assert "mass1.F" in done.stderr and "residual by stage" in done.stderr
+
+
+def test_halving_recovers_an_interval_that_does_not_converge(tmp_path: Path) -> None:
+    sc = tmp_path / "halving.toml"
+    text = OSCILLATOR.read_text().replace("interval = 0.05 ", "interval = 0.4 ").replace("max_stages = 50", "max_stages = 8")
+    sc.write_text(text.replace("[coupling]\n", "[coupling]\nmax_halvings = 4\n"))
+    done = subprocess.run([*COSIM, "run", str(sc), "--inprocess", "--quiet", "--stop", "0.8",
+                           "--output", str(tmp_path / "h.csv")], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    diag = (tmp_path / "h.diag.csv").read_text().splitlines()[1:]
+    assert any(int(row.split(",")[-1]) > 0 for row in diag)
+
+
+def test_bad_scenario_exits_2_naming_the_key(tmp_path: Path) -> None:
+    sc = tmp_path / "bad.toml"
+    sc.write_text(OSCILLATOR.read_text().replace('to = "mass2.F"', 'to = "mass3.F"'))
+    done = subprocess.run([*COSIM, "run", str(sc)], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2 and "[couplings[1]]" in done.stderr and "mass3" in done.stderr
+
+
+def test_describe_prints_order_and_feedback_edges() -> None:
+    done = subprocess.run([*COSIM, "describe", str(OSCILLATOR)], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert "order (derived): mass1 -> mass2" in done.stdout
+    assert "feedback edges (1 scalar signals): mass2.u -> mass1.F" in done.stdout
+    assert "mass1.u -> mass2.F via gain" in done.stdout
+
+
+def test_external_subsim_started_by_hand(tmp_path: Path, popen_cleanup: list) -> None:
+    """The coordinator prints the command; a 'user' starts it as a separate process."""
+    sc = tmp_path / "ext.toml"
+    text = OSCILLATOR.read_text()
+    sc.write_text(text.replace('[subsims.mass2]\nmodel = "subsims.oscillator.subsim:Mass"',
+                               '[subsims.mass2]\nexternal = true\nmodel = "subsims.oscillator.subsim:Mass"'))
+    out = tmp_path / "ext.csv"
+    coord = subprocess.Popen([*COSIM, "run", str(sc), "--stop", "0.2", "--output", str(out), "--quiet"],
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    popen_cleanup.append(coord)
+    command = None
+    for line in coord.stderr:
+        if line.strip().startswith("python -m cosim.serve"):
+            command = line.split()
+            break
+    assert command is not None and "--connect" in command and "mass2" in command
+    user = subprocess.Popen([sys.executable, *command[1:]], stderr=subprocess.DEVNULL)
+    popen_cleanup.append(user)
+    stdout, _ = coord.communicate(timeout=120)
+    assert coord.returncode == 0
+    _, data = read_results(out)
+    assert data[-1, 0] == pytest.approx(0.2)
+    assert user.wait(timeout=15) == 0  # it leaves when the coordinator does
