@@ -63,11 +63,13 @@ class FlexModel:
         mi, r = self.masses, self.r
         n, t = mi.size, self.Phi.shape[1]
         set_ = object.__setattr__
+        set_(self, "I_b", 0.5 * (self.I_b + self.I_b.T))  # validated symmetric to 1e-12; make it exact
         set_(self, "n", n)
         set_(self, "t", t)
         set_(self, "m", float(self.m_b + mi.sum()))
         set_(self, "mc0", self.m_b * self.s + mi @ r)  # (3-4), category 1
         rr = np.einsum("i,ia,ib->ab", mi, r, r)
+        rr = 0.5 * (rr + rr.T)
         set_(self, "cmat", rr)  # sum m_i r_i r_i^T (code "CMAT")
         # I1 = I_b - m_b s~ s~ - sum m_i r~ r~  (3-10), using -a~a~ = |a|^2 E - a a^T
         set_(self, "I1", self.I_b + self.m_b * (self.s @ self.s * np.eye(3) - np.outer(self.s, self.s))
@@ -151,7 +153,7 @@ def coefficient_matrix(model: FlexModel, q: np.ndarray, mass_order: int | None =
     A[:3, :3] = model.m * np.eye(3)
     A[:3, 3:6] = -mc_x
     A[3:6, :3] = mc_x
-    A[3:6, 3:6] = inertia
+    A[3:6, 3:6] = 0.5 * (inertia + inertia.T)  # exact symmetry (BLAS sums may differ in the last bit)
     A[:3, 6:] = model.A13
     A[6:, :3] = model.A13.T
     A[3:6, 6:] = A23
@@ -195,10 +197,35 @@ def nonlinear_terms(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(u_t, u_r, u_v) summed over categories <= kin_order: (3-6), (3-11), (3-3)."""
     order = model.kin_order if kin_order is None else kin_order
+    if order == 3:
+        return nonlinear_terms_full(model, V, w, q, qd)
     cats = nonlinear_terms_by_category(model, V, w, q, qd)
     ut, ur, uv = cats[1]
     for k in range(2, order + 1):
         ut, ur, uv = ut + cats[k][0], ur + cats[k][1], uv + cats[k][2]
+    return ut, ur, uv
+
+
+def nonlinear_terms_full(
+    model: FlexModel, V: np.ndarray, w: np.ndarray, q: np.ndarray, qd: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """All three categories at once, in the compact forms with rho_i = r_i + q_i (3-3), (3-6), (3-11):
+
+    u_t = -m w x V - 2 w x sum m_i qdot_i - (w.mc) w + |w|^2 mc
+    u_v,i = m_i (-w x V - 2 w x qdot_i - (w.rho_i) w + |w|^2 rho_i)
+    u_r = -mc x (w x V) + w x sum m_i rho_i (rho_i.w) - w x I_b w - m_b (s.w) s x w - 2 sum m_i rho_i x (w x qdot_i)
+    """
+    mi = model.masses
+    rho = model.r + q
+    mc = model.mc0 + mi @ q
+    w2 = w @ w
+    wxV = cross(w, V)
+    w_x_qd = cross(w, qd)
+    rho_w = rho @ w
+    ut = -model.m * wxV - 2.0 * cross(w, mi @ qd) - (w @ mc) * w + w2 * mc
+    uv = mi[:, None] * (-wxV - 2.0 * w_x_qd - rho_w[:, None] * w + w2 * rho)
+    ur = (-cross(mc, wxV) + cross(w, (mi * rho_w) @ rho - model.I_b @ w) - model.m_b * (model.s @ w) * cross(model.s, w)
+          - 2.0 * mi @ cross(rho, w_x_qd))
     return ut, ur, uv
 
 

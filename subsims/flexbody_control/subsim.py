@@ -1,0 +1,48 @@
+"""Subsim adapter of the flexbody attitude controller (algebraic: no state).
+
+inputs   euler123 (3, rad): the flexbody's 1-2-3 Euler angles; omega (3, rad/s): its body rates.
+outputs  tau0 (3, torque units): torque at O_g, body axes, for the flexbody's ``tau0`` input.
+
+Parameters (``law.DEFAULT_CONTROL``): ``law`` "pd" (tau0 = -(kp (theta - theta_cmd) + kd omega)) with ``kp``,
+``kd``, ``theta_cmd_deg``; or "bang_bang" (open loop, spec AT-10) with ``torque``, ``t_on``, ``t_switch``, ``t_off``.
+The bang-bang output is piecewise constant inside every interval: at a switch that is the interval's last sample
+it reports the left limit, so a linearly interpolated input never ramps across the switch when switches fall on
+interval boundaries (spec §4.1 R3).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from cosim.subsim import InputFunction, Port, Subsim
+from subsims.flexbody_control.law import ControlParams, control_torque
+
+
+class AttitudeControl(Subsim):
+    """PD attitude control on the report's Euler angles, or a bang-bang slew, for the flexbody."""
+
+    name = "flexbody_control"
+    algebraic = True
+    inputs = {
+        "euler123": Port(3, "rad", "flexbody 1-2-3 Euler angles (report eq. 7-1)"),
+        "omega": Port(3, "rad/s", "flexbody body rates"),
+    }
+    outputs = {"tau0": Port(3, "lbf*ft", "control torque at O_g, body axes")}
+
+    def initial_state(self, params: Mapping[str, Any]) -> np.ndarray:
+        self.p = ControlParams.from_mapping(params)
+        return np.empty(0, dtype=np.float64)
+
+    def advance(
+        self, state: np.ndarray, times: np.ndarray, u: InputFunction
+    ) -> tuple[Mapping[str, np.ndarray], np.ndarray]:
+        times = np.asarray(times, dtype=np.float64)
+        tau = np.empty((times.size, 3))
+        for k, tt in enumerate(times):
+            d = u(float(tt))
+            tau[k] = control_torque(self.p, float(tt), np.asarray(d["euler123"], dtype=np.float64),
+                                    np.asarray(d["omega"], dtype=np.float64), left=k == times.size - 1 and k > 0)
+        return {"tau0": tau}, np.array(state, dtype=np.float64)
