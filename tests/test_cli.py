@@ -98,7 +98,8 @@ def test_non_convergence_stops_with_a_named_interval_and_signals(tmp_path: Path)
 
 def test_halving_recovers_an_interval_that_does_not_converge(tmp_path: Path) -> None:
     sc = tmp_path / "halving.toml"
-    text = OSCILLATOR.read_text().replace("interval = 0.05 ", "interval = 0.4 ").replace("max_stages = 50", "max_stages = 8")
+    text = OSCILLATOR.read_text().replace("interval = 0.05 ", "interval = 0.4 ")
+    text = text.replace("max_stages = 50", "max_stages = 8")
     sc.write_text(text.replace("[coupling]\n", "[coupling]\nmax_halvings = 4\n"))
     done = subprocess.run([*COSIM, "run", str(sc), "--inprocess", "--quiet", "--stop", "0.8",
                            "--output", str(tmp_path / "h.csv")], capture_output=True, text=True, timeout=120)
