@@ -13,8 +13,21 @@ from cosim.protocol.errors import SubsimError
 from cosim.runner import open_session, run_scenario
 from cosim.scenario import ScenarioError, load
 
+# what `cosim run` runs with no scenario: the paper's satellite, case 1, RF-D over Zenoh, shortened
+DEFAULT_SCENARIO = Path(__file__).resolve().parents[1] / "scenarios" / "satellite" / "case1.toml"
+DEFAULT_STOP = 120.0
+
 
 def _run(args: argparse.Namespace) -> int:
+    if args.scenario is None:
+        if not DEFAULT_SCENARIO.exists():
+            raise ScenarioError(f"no scenario given and the default {DEFAULT_SCENARIO} is not there (installed "
+                                "without the source tree?): name a scenario file")
+        args.scenario = DEFAULT_SCENARIO
+        args.stop = DEFAULT_STOP if args.stop is None else args.stop
+        print(f"cosim: no scenario given: running {DEFAULT_SCENARIO} to t = {args.stop:g} s "
+              f"(the full paper run: cosim run scenarios/satellite/case1.toml)", file=sys.stderr)
+        args.plot = True
     scenario = load(args.scenario)
     if args.method == "unified":
         from cosim.unified import run_unified
@@ -30,6 +43,11 @@ def _run(args: argparse.Namespace) -> int:
     if report.method == "distributed":
         print(f"order: {' -> '.join(report.order)}; feedback: {'; '.join(report.feedback) or 'none'}")
     print(f"results: {report.output}\ndiagnostics: {report.diagnostics}")
+    if args.plot:
+        from cosim.plot import plot_files
+
+        pngs = plot_files([report.output], report.output.parent / "plots")
+        print(f"plots: {', '.join(str(p) for p in pngs)}")
     return 0
 
 
@@ -89,7 +107,9 @@ def build_parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", required=True)
 
     r = sub.add_parser("run", help="run a scenario")
-    r.add_argument("scenario", type=Path)
+    r.add_argument("scenario", type=Path, nargs="?",
+                   help=f"scenario file (default: {DEFAULT_SCENARIO.name} to t = {DEFAULT_STOP:g} s, with plots)")
+    r.add_argument("--plot", action="store_true", help="also write PNG plots beside the results")
     r.add_argument("--stop", type=float, help="stop time (default: the scenario's)")
     r.add_argument("--output", type=Path, help="result file, .csv or .npz (default: results/<name>-<method>.csv)")
     r.add_argument("--method", choices=[*METHODS, "unified"], help="coupling method (default: the scenario's)")
