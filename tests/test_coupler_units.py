@@ -1,0 +1,123 @@
+"""Coupler parts: the convrg check, order/feedback derivation, first guesses, settings, remote stages."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from cosim.coupler.convergence import Tolerance, check, convrg
+from cosim.coupler.couplings import Coupling, SignalRef, derive_order, feedback_weight
+from cosim.coupler.first_guess import first_guess
+from cosim.coupler.relaxation import Coordinator, Settings
+from cosim.handles import InProcessHandle
+from subsims.integrator.subsim import Integrator
+
+
+def test_convrg_is_relative_to_the_newest_span_or_absolute() -> None:
+    new = np.array([[0.0, 5.0], [2.0, 5.0], [4.0, 5.0]])  # spans 4 and 0
+    d1, d2 = 2.0**-5, 2.0**-23  # exact in binary, so the boundary case below is exact too
+    old = new + np.array([[0.0, 0.0], [d1, d2], [0.0, 0.0]])
+    residual, ok = convrg(new, old, Tolerance(rel=0.01, abs=1e-6))
+    np.testing.assert_array_equal(residual, [d1, d2])
+    np.testing.assert_array_equal(ok, [True, True])  # d1 <= 0.01*4 ; d2 <= res (span 0)
+    _, ok = convrg(new, old, Tolerance(rel=0.005, abs=1e-8))
+    np.testing.assert_array_equal(ok, [False, False])
+    _, ok = convrg(new, old, Tolerance(rel=2.0**-7, abs=0.0))  # boundary d1 == rel * span: <= passes
+    np.testing.assert_array_equal(ok, [True, False])
+
+
+def test_check_uses_per_signal_tolerances_and_names_failures() -> None:
+    new = {"a.x": np.array([[0.0], [1.0]]), "b.y": np.array([[0.0], [1000.0]])}
+    old = {"a.x": np.array([[0.0], [1.001]]), "b.y": np.array([[0.0], [1000.5]])}
+    result = check(new, old, Tolerance(1e-4, 0.0), {"b.y": Tolerance(0.0, 1.0)})
+    assert result.failing == ["a.x"] and not result.converged
+    assert result.largest == pytest.approx(0.5)
+
+
+@pytest.mark.parametrize("bad", [-1.0, math.nan, math.inf, "1e-3", True])
+def test_tolerance_rejects_bad_values(bad) -> None:
+    with pytest.raises(ValueError, match="tolerance"):
+        Tolerance(bad, 0.0)
+
+
+def satellite_like() -> tuple[list[str], list[Coupling], dict[SignalRef, int]]:
+    """The paper's three subsims and couplings (spec §4.3/§5.1) with their sizes."""
+    couplings = [
+        Coupling.make("orbit.f", ["aero.force", "attitude.phi"], "linear", {"gains": [1, 1]}),
+        Coupling.make("attitude.R", "orbit.R"),
+        Coupling.make("attitude.torque", ["aero.torque", "aero.force"], "linear", {"gains": [1, 1]}),
+        Coupling.make("aero.R_body", ["orbit.R", "attitude.phi"], "linear", {"gains": [1, 1]}),
+        Coupling.make("aero.V_body", ["orbit.V", "attitude.phi"], "linear", {"gains": [1, 1]}),
+    ]
+    sizes = {c.target: 3 for c in couplings}
+    return ["aero", "attitude", "orbit"], couplings, sizes
+
+
+def test_derived_order_has_fewest_feedback_signals() -> None:
+    names, couplings, sizes = satellite_like()
+    order = derive_order(names, couplings, sizes)
+    weight = feedback_weight(order, couplings, sizes)
+    assert weight == 6  # the paper's 6 signals: aero force and torque (or an equivalent cut)
+    assert weight == min(feedback_weight(p, couplings, sizes) for p in
+                         [("orbit", "attitude", "aero"), ("aero", "orbit", "attitude"), ("attitude", "aero", "orbit")])
+    assert feedback_weight(["orbit", "attitude", "aero"], couplings, sizes) == 6
+    assert feedback_weight(["attitude", "orbit", "aero"], couplings, sizes) == 9
+
+
+def test_given_order_decides_feedback_edges() -> None:
+    handles = {n: InProcessHandle(Integrator(), n) for n in ("p", "q")}
+    for h in handles.values():
+        h.configure({})
+    couplings = [Coupling.make("p.u", "q.y"), Coupling.make("q.u", "p.y")]
+    c = Coordinator(handles, couplings, Settings(method="distributed", order=["q", "p"]))
+    assert c.order == ["q", "p"] and [str(f) for f in c.feedback] == ["p.y -> q.u"]
+    with pytest.raises(ValueError, match="every subsim"):
+        Coordinator(handles, couplings, Settings(method="distributed", order=["q"]))
+
+
+def test_first_guess_policies() -> None:
+    prev_t = np.array([0.0, 0.5, 1.0])
+    prev = {"s.u": (prev_t, np.column_stack([2 * prev_t, np.ones(3)]))}
+    times = np.array([1.0, 1.5, 2.0])
+    sizes = {"s.u": 2}
+    np.testing.assert_array_equal(first_guess("zero", times, sizes, prev)["s.u"], np.zeros((3, 2)))
+    np.testing.assert_array_equal(first_guess("hold", times, sizes, prev)["s.u"], [[2, 1]] * 3)
+    np.testing.assert_allclose(first_guess("extrapolate", times, sizes, prev)["s.u"],
+                               [[2, 1], [3, 1], [4, 1]], rtol=1e-15)
+    np.testing.assert_array_equal(first_guess("extrapolate", times, sizes, None)["s.u"], np.zeros((3, 2)))
+    with pytest.raises(ValueError, match="unknown first-guess"):
+        first_guess("oracle", times, sizes, prev)
+
+
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [("method", "jacobi"), ("interval", 0.0), ("samples", 1), ("first_guess", "x"), ("interp", "spline"),
+     ("max_stages", 1), ("max_halvings", -1)],
+)
+def test_settings_reject_bad_values_naming_the_field(field: str, value) -> None:
+    with pytest.raises(ValueError, match=field):
+        Settings(**{field: value})
+
+
+@pytest.mark.parametrize("method", ["centralized", "distributed"])
+def test_taylor_stages_over_zenoh_equal_in_process_bit_for_bit(spawn_subsim, method: str) -> None:
+    """Eq. 5 through real processes: same stage values, bit for bit, as in-process."""
+    k, ndp, H = -1.7, 6, 0.9
+    settings = Settings(method=method, interval=H, samples=ndp, first_guess="zero", interp="lagrange",
+                        tol=Tolerance(1e-13, 1e-15))
+    coupling = [Coupling.make("y.u", "y.y", "gain", {"k": k})]
+    runs = []
+    for handle in (InProcessHandle(Integrator(), "y"), spawn_subsim("subsims.integrator", name="y")):
+        handle.configure({"y0": [2.0]})
+        seen: list[np.ndarray] = []
+        c = Coordinator({"y": handle}, coupling, settings, on_stage=lambda n, out: seen.append(out["y"]["y"]))
+        c.advance(0.0, H)
+        runs.append(seen)
+    t = c.sample_times(0.0, H)
+    for n in range(ndp):
+        taylor = 2.0 * sum((k * t) ** i / math.factorial(i) for i in range(n + 1))
+        np.testing.assert_allclose(runs[1][n][:, 0], taylor, rtol=1e-12)
+    assert len(runs[0]) == len(runs[1])
+    assert all(a.tobytes() == b.tobytes() for a, b in zip(runs[0], runs[1]))
