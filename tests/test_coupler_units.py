@@ -112,7 +112,8 @@ def test_taylor_stages_over_zenoh_equal_in_process_bit_for_bit(spawn_subsim, met
     for handle in (InProcessHandle(Integrator(), "y"), spawn_subsim("subsims.integrator", name="y")):
         handle.configure({"y0": [2.0]})
         seen: list[np.ndarray] = []
-        c = Coordinator({"y": handle}, coupling, settings, on_stage=lambda n, out: seen.append(out["y"]["y"]))
+        c = Coordinator({"y": handle}, coupling, settings,
+                        on_stage=lambda n, out, seen=seen: seen.append(out["y"]["y"]))
         c.advance(0.0, H)
         runs.append(seen)
     t = c.sample_times(0.0, H)
