@@ -24,7 +24,13 @@ def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
         a0, a1, a2 = a
         b0, b1, b2 = b
         return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
-    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    if a.shape == b.shape or a.ndim < b.ndim:
+        shape = b.shape if a.ndim < b.ndim or a.shape == b.shape else a.shape
+    elif b.ndim < a.ndim:
+        shape = a.shape
+    else:
+        shape = np.broadcast_shapes(a.shape, b.shape)
+    out = np.empty(shape)
     out[..., 0] = a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]
     out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
     out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]

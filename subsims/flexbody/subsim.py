@@ -39,8 +39,12 @@ def _ports(setup: FlexSetup) -> tuple[dict[str, Port], dict[str, Port]]:
     TQ, E = f"{F}*{L}", f"{F}*{L}"
     n3, t = 3 * setup.model.n, setup.model.t
     sq = f"{u['mass']}^0.5*{L}"  # eta: q = Phi eta with Phi^T M Phi = E
-    modal = {"eta": Port(t, sq, "modal coordinates (basis-dependent)"), "eta_dot": Port(t, f"{sq}/s", "modal rates")}
-    modal = modal if t else {}
+    modal = {}
+    if t:  # no modal ports for the rigid vehicle (t = 0)
+        modal = {
+            "eta": Port(t, sq, "modal coordinates (basis-dependent)"),
+            "eta_dot": Port(t, f"{sq}/s", "modal rates"),
+        }
     defl = {
         "q": Port(n3, L, "particle deflections q_i, body axes, particle-major"),
         "q_dot": Port(n3, f"{L}/s", "particle deflection rates"),
@@ -140,10 +144,10 @@ class FlexBody(Subsim):
     ) -> tuple[Mapping[str, np.ndarray], np.ndarray]:
         times = np.asarray(times, dtype=np.float64)
         y0 = np.array(state, dtype=np.float64)
+        advance = self._advance_free if self.setup.mode == "free" else self._advance_appendage
         try:
-            if self.setup.mode == "free":
-                return self._advance_free(y0, times, u)
-            return self._advance_appendage(y0, times, u)
+            with np.errstate(over="ignore", invalid="ignore"):  # a blow-up is reported as a ModelError
+                return advance(y0, times, u)
         except np.linalg.LinAlgError as exc:
             raise ModelError(f"flexbody: {exc}") from exc
 
