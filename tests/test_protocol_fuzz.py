@@ -16,17 +16,17 @@ new command or field is fuzzed without editing this file.
 Generated inputs per run (``max_examples``; derandomized and without the example database, so CI
 sees the same inputs on every run):
 
-    test_decode_request_random_bytes                 2500
-    test_decode_request_random_msgpack               2000
-    test_decode_request_rejects_malformed_requests   3000
-    test_decode_reply_random                         1500
-    test_decode_reply_rejects_malformed_results      1000
-    test_decode_reply_ignores_unknown_fields          300
-    test_answer_garbage_is_an_error_reply            1000
-    test_answer_out_of_contract_requests              500
-    test_request_round_trip                          1000
-    test_reply_round_trip                             300
-                                             total  13100
+    test_decode_request_random_bytes                 4000
+    test_decode_request_random_msgpack               1500   (each also decoded truncated)
+    test_decode_request_rejects_malformed_requests   2000
+    test_decode_reply_random                         1000   (each also decoded truncated)
+    test_decode_reply_rejects_malformed_results       700
+    test_decode_reply_ignores_unknown_fields          100
+    test_answer_garbage_is_an_error_reply             600
+    test_answer_out_of_contract_requests              300
+    test_request_round_trip                           600
+    test_reply_round_trip                             200
+                                             total  11000
 """
 
 from __future__ import annotations
@@ -38,7 +38,7 @@ from typing import Any
 import msgpack
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, assume, given, settings
+from hypothesis import HealthCheck, assume, event, given, settings
 from hypothesis import strategies as st
 
 from cosim.protocol.errors import ERROR_CODES, ProtocolError
@@ -83,8 +83,6 @@ def fuzz(max_examples: int):
     )
 
 
-
-
 def pack(obj: Any) -> bytes:
     return msgpack.packb(obj, use_bin_type=True)
 
@@ -108,7 +106,7 @@ junk = st.recursive(
         st.lists(inner, max_size=4),
         st.dictionaries(st.text(max_size=8), inner, max_size=4),
     ),
-    max_leaves=12,
+    max_leaves=8,
 )
 NAMES = st.text(min_size=1, max_size=8)
 
@@ -127,8 +125,21 @@ def not_(*types: type) -> st.SearchStrategy:
 # --- arrays -----------------------------------------------------------------------------------
 
 SHAPES = st.lists(st.integers(0, 3), min_size=1, max_size=MAX_NDIM)
-SPECIAL = [0.0, -0.0, 5e-324, -5e-324, 2.2250738585072009e-308, 2.225073858507201e-308,
-           1.7976931348623157e308, -1.7976931348623157e308, 1e-300, 1e300, math.inf, -math.inf, math.nan]
+SPECIAL = [
+    0.0,
+    -0.0,
+    5e-324,
+    -5e-324,
+    2.2250738585072009e-308,
+    2.225073858507201e-308,
+    1.7976931348623157e308,
+    -1.7976931348623157e308,
+    1e-300,
+    1e300,
+    math.inf,
+    -math.inf,
+    math.nan,
+]
 
 
 @st.composite
@@ -165,12 +176,12 @@ def _sized(shape: list[int], extra: int) -> dict:
 
 bad_arrays = st.one_of(
     # byte count does not match the shape
-    st.tuples(SHAPES, st.integers(-64, 64).filter(lambda k: k != 0)).filter(
-        lambda sk: 8 * math.prod(sk[0]) + sk[1] >= 0
-    ).map(lambda sk: _sized(*sk)),
-    st.tuples(SHAPES, st.binary(max_size=40)).filter(lambda sb: len(sb[1]) != 8 * math.prod(sb[0])).map(
-        lambda sb: {"shape": sb[0], "data": sb[1]}
-    ),
+    st.tuples(SHAPES, st.integers(-64, 64).filter(lambda k: k != 0))
+    .filter(lambda sk: 8 * math.prod(sk[0]) + sk[1] >= 0)
+    .map(lambda sk: _sized(*sk)),
+    st.tuples(SHAPES, st.binary(max_size=40))
+    .filter(lambda sb: len(sb[1]) != 8 * math.prod(sb[0]))
+    .map(lambda sb: {"shape": sb[0], "data": sb[1]}),
     # huge declared shapes with little data
     st.just({"shape": [2**40, 2**40], "data": b"\x00" * 8}),
     st.just({"shape": [2**40, 2**40], "data": b""}),
@@ -182,9 +193,9 @@ bad_arrays = st.one_of(
         lambda s: {"shape": [0, *s], "data": b""}
     ),
     # negative dimensions
-    st.lists(st.integers(-(2**63), 4), min_size=1, max_size=MAX_NDIM).filter(lambda s: min(s) < 0).map(
-        lambda s: {"shape": s, "data": b"\x00" * 8 * abs(math.prod(s)) if abs(math.prod(s)) < 64 else b""}
-    ),
+    st.lists(st.integers(-(2**63), 4), min_size=1, max_size=MAX_NDIM)
+    .filter(lambda s: min(s) < 0)
+    .map(lambda s: {"shape": s, "data": b"\x00" * 8 * abs(math.prod(s)) if abs(math.prod(s)) < 64 else b""}),
     # too many or no dimensions
     st.lists(st.integers(0, 2), min_size=MAX_NDIM + 1, max_size=3 * MAX_NDIM).map(lambda s: _sized(s, 0)),
     st.just({"shape": [], "data": b"\x00" * 8}),
@@ -282,9 +293,7 @@ def invalid(check: Checker) -> st.SearchStrategy:
             not_(int).map(lambda s: {"size": s}),
             not_(str).map(lambda u: {"size": 1, "unit": u}),
         )
-        return st.tuples(
-            st.one_of(not_(dict), st.dictionaries(NAMES, bad_port, min_size=1, max_size=2)), st.just(bad)
-        )
+        return st.tuples(st.one_of(not_(dict), st.dictionaries(NAMES, bad_port, min_size=1, max_size=2)), st.just(bad))
     if check is t_params:
         return st.tuples(
             st.one_of(
@@ -347,7 +356,7 @@ def decode_totally(payload: bytes) -> None:
     assert request.cmd in REQUESTS
 
 
-@fuzz(2500)
+@fuzz(4000)
 @given(st.binary(max_size=200))
 def test_decode_request_random_bytes(payload: bytes) -> None:
     decode_totally(payload)
@@ -368,7 +377,7 @@ envelopes = st.fixed_dictionaries(
 )
 
 
-@fuzz(2000)
+@fuzz(1500)
 @given(st.one_of(junk, envelopes, st.dictionaries(junk.filter(lambda k: not isinstance(k, (dict, list))), junk)))
 def test_decode_request_random_msgpack(value: Any) -> None:
     try:
@@ -385,6 +394,11 @@ REQUEST_MUTATIONS = [
     "missing_field",
     "unknown_field",
     "wrong_type",
+    "wrong_type",
+    "bad_array",
+    "bad_array",
+    "bad_array",
+    "nested_junk",
     "version",
     "envelope_field",
     "cmd_type",
@@ -392,28 +406,54 @@ REQUEST_MUTATIONS = [
     "args_type",
     "non_string_key",
 ]
+ARRAY_FIELDS = {
+    cmd: [k for k, (check, _) in fields.items() if check in (t_array, t_array_map)] for cmd, fields in REQUESTS.items()
+}
 
 
 @st.composite
-def malformed_requests(draw: st.DrawFn) -> tuple[bytes, set[str], str]:
-    cmd = draw(st.sampled_from(COMMANDS))
+def malformed_requests(draw: st.DrawFn) -> tuple[bytes, set[str], str, str]:
+    """(payload, acceptable error codes, "cmd/mutation", text the error message must contain)"""
+    kind = draw(st.sampled_from(REQUEST_MUTATIONS))
+    if kind == "bad_array":
+        cmd = draw(st.sampled_from([c for c in COMMANDS if ARRAY_FIELDS[c]]))
+    elif kind in ("missing_field", "wrong_type", "nested_junk"):
+        cmd = draw(st.sampled_from([c for c in COMMANDS if REQUESTS[c]]))
+    else:
+        cmd = draw(st.sampled_from(COMMANDS))
     fields = REQUESTS[cmd]
     args = to_wire(draw(valid_fields(fields)))
     msg: dict[Any, Any] = {"v": PROTOCOL_VERSION, "cmd": cmd, "args": args}
-    kind = draw(st.sampled_from(REQUEST_MUTATIONS))
     required = [k for k, (_, req) in fields.items() if req]
     if kind == "missing_field" and not required:
         kind = "unknown_field"
-    if kind == "wrong_type" and not fields:
-        kind = "unknown_field"
-    codes = {"bad_request"}
+    codes, mention = {"bad_request"}, ""
     if kind == "missing_field":
-        del args[draw(st.sampled_from(required))]
+        name = draw(st.sampled_from(required))
+        del args[name]
+        mention = f"missing required field {name!r}"
     elif kind == "unknown_field":
         args[draw(NAMES.filter(lambda k: k not in fields))] = draw(junk)
+        mention = "unknown field"
     elif kind == "wrong_type":
         name = draw(st.sampled_from(sorted(fields)))
         args[name], codes = draw(invalid(fields[name][0]))
+        mention = f"args.{name}"
+    elif kind == "bad_array":
+        name = draw(st.sampled_from(ARRAY_FIELDS[cmd]))
+        mention = f"args.{name}"
+        bad = draw(bad_arrays)
+        if fields[name][0] is t_array_map:  # one bad array among good ones
+            good = {k: wire_array(a) for k, a in draw(st.dictionaries(NAMES, arrays(), max_size=2)).items()}
+            bad = {**good, draw(NAMES.filter(lambda k: k not in good)): bad}
+        args[name] = bad
+    elif kind == "nested_junk":
+        name = draw(st.sampled_from(sorted(fields)))
+        mention = f"args.{name}"
+        if fields[name][0] is t_params:
+            args[name] = {"p": nested(draw(st.integers(MAX_NESTING + 1, 200)))}
+        else:
+            args[name] = nested(draw(st.integers(1, 200)), draw(junk))
     elif kind == "version":
         v = draw(st.one_of(st.just("absent"), not_(int), INT64.filter(lambda v: v != PROTOCOL_VERSION)))
         if v == "absent":
@@ -433,14 +473,16 @@ def malformed_requests(draw: st.DrawFn) -> tuple[bytes, set[str], str]:
     elif kind == "non_string_key":
         args[draw(st.one_of(INT64, st.booleans(), st.none()))] = 1
         codes = {"decode"}
-    return pack(msg), codes, f"{cmd}/{kind}"
+    return pack(msg), codes, f"{cmd}/{kind}", mention
 
 
-@fuzz(3000)
+@fuzz(2000)
 @given(malformed_requests())
-def test_decode_request_rejects_malformed_requests(case: tuple[bytes, set[str], str]) -> None:
-    payload, codes, _what = case
-    expect_protocol_error(payload, codes)
+def test_decode_request_rejects_malformed_requests(case: tuple[bytes, set[str], str, str]) -> None:
+    payload, codes, what, mention = case
+    event(what.split("/")[1])  # pytest --hypothesis-show-statistics shows the mix of mutations
+    exc = expect_protocol_error(payload, codes)
+    assert mention in exc.message, f"{what}: {exc.message!r} does not say {mention!r}"
 
 
 def test_named_hostile_arrays_are_rejected() -> None:
@@ -457,7 +499,7 @@ def test_named_hostile_arrays_are_rejected() -> None:
     ]:
         payload = pack({"v": 1, "cmd": "set_state", "args": {"time": 0.0, "state": {"shape": shape, "data": data}}})
         exc = expect_protocol_error(payload, {"bad_request"})
-        assert "state" in exc.message or "undecodable" in exc.message
+        assert "args.state" in exc.message, exc.message
 
 
 def test_deep_nesting_is_a_protocol_error() -> None:
@@ -476,9 +518,7 @@ reply_envelopes = st.fixed_dictionaries(
         "v": st.one_of(st.just(PROTOCOL_VERSION), junk),
         "ok": st.one_of(st.booleans(), junk),
         "result": junk,
-        "error": st.one_of(
-            st.dictionaries(st.sampled_from(["code", "message", "subsim", "command", "x"]), junk), junk
-        ),
+        "error": st.one_of(st.dictionaries(st.sampled_from(["code", "message", "subsim", "command", "x"]), junk), junk),
     },
 )
 
@@ -492,7 +532,7 @@ def decode_reply_totally(cmd: str, payload: bytes) -> None:
     assert isinstance(out, (dict, ErrorInfo))
 
 
-@fuzz(1500)
+@fuzz(1000)
 @given(reply_cmds, st.one_of(st.binary(max_size=200), junk.map(pack), reply_envelopes.map(pack)))
 def test_decode_reply_random(cmd: str, payload: bytes) -> None:
     decode_reply_totally(cmd, payload)
@@ -533,7 +573,7 @@ def malformed_results(draw: st.DrawFn) -> tuple[str, bytes, set[str]]:
     return cmd, pack(msg), codes
 
 
-@fuzz(1000)
+@fuzz(700)
 @given(malformed_results())
 def test_decode_reply_rejects_malformed_results(case: tuple[str, bytes, set[str]]) -> None:
     cmd, payload, codes = case
@@ -546,8 +586,11 @@ def _same(a: Any, b: Any) -> bool:
     """Equality with arrays compared bit for bit and floats by their bits (so -0.0 != 0.0)."""
     if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
         a64 = np.ascontiguousarray(a, dtype="<f8")
-        return isinstance(b, np.ndarray) and b.dtype == np.dtype("<f8") and a64.shape == b.shape and (
-            a64.tobytes() == b.tobytes()
+        return (
+            isinstance(b, np.ndarray)
+            and b.dtype == np.dtype("<f8")
+            and a64.shape == b.shape
+            and (a64.tobytes() == b.tobytes())
         )
     if isinstance(a, dict):
         return isinstance(b, dict) and a.keys() == b.keys() and all(_same(a[k], b[k]) for k in a)
@@ -558,7 +601,7 @@ def _same(a: Any, b: Any) -> bool:
     return type(a) is type(b) and a == b
 
 
-@fuzz(300)
+@fuzz(100)
 @given(st.data())
 def test_decode_reply_ignores_unknown_fields(data: st.DataObject) -> None:
     cmd = data.draw(st.sampled_from(sorted(RESULTS)))
@@ -613,7 +656,7 @@ def assert_error_reply(reply: bytes, rt: Runtime) -> ErrorInfo:
     return info
 
 
-@fuzz(1000)
+@fuzz(600)
 @given(garbage)
 def test_answer_garbage_is_an_error_reply(payload: bytes) -> None:
     try:
@@ -634,39 +677,47 @@ out_of_contract = st.one_of(
     st.tuples(finite.filter(lambda t: t != 1.0), st.integers(2, 5)).map(
         lambda a: ("run_interval", {"t": np.linspace(a[0], a[0] + 1, a[1]), "inputs": {"u": np.zeros((a[1], 2))}})
     ),
-    st.lists(finite, min_size=1, max_size=5).map(
-        lambda ts: ("run_interval", {"t": np.array([1.0, *sorted(ts, reverse=True)]), "inputs": {"u": np.zeros(1)}})
-    ).filter(lambda c: np.any(np.diff(c[1]["t"]) <= 0) or c[1]["t"].size < 2),
+    st.lists(finite, min_size=1, max_size=5)
+    .map(lambda ts: ("run_interval", {"t": np.array([1.0, *sorted(ts, reverse=True)]), "inputs": {"u": np.zeros(1)}}))
+    .filter(lambda c: np.any(np.diff(c[1]["t"]) <= 0) or c[1]["t"].size < 2),
     st.sampled_from([math.nan, math.inf, -math.inf]).map(
         lambda x: ("run_interval", {"t": np.array([1.0, x]), "inputs": {"u": np.zeros((2, 2))}})
     ),
-    st.lists(st.integers(0, 4), min_size=1, max_size=3).filter(lambda s: tuple(s) != (3, 2)).map(
-        lambda s: ("run_interval", {"t": np.array([1.0, 1.2, 1.4]), "inputs": {"u": np.zeros(s)}})
-    ),
+    st.lists(st.integers(0, 4), min_size=1, max_size=3)
+    .filter(lambda s: tuple(s) != (3, 2))
+    .map(lambda s: ("run_interval", {"t": np.array([1.0, 1.2, 1.4]), "inputs": {"u": np.zeros(s)}})),
     st.sampled_from([math.nan, math.inf]).map(
         lambda x: ("run_interval", {"t": np.array([1.0, 2.0]), "inputs": {"u": np.array([[0.0, x], [0.0, 0.0]])}})
     ),
     NAMES.filter(lambda n: n != "u").map(
         lambda n: ("run_interval", {"t": np.array([1.0, 2.0]), "inputs": {n: np.zeros((2, 2))}})
     ),
-    st.text(max_size=8).filter(lambda s: s not in ("linear", "cubic", "lagrange")).map(
-        lambda s: ("run_interval", {"t": np.array([1.0, 2.0]), "inputs": {"u": np.zeros((2, 2))}, "interp": s})
-    ),
+    st.text(max_size=8)
+    .filter(lambda s: s not in ("linear", "cubic", "lagrange"))
+    .map(lambda s: ("run_interval", {"t": np.array([1.0, 2.0]), "inputs": {"u": np.zeros((2, 2))}, "interp": s})),
     # rollback to a time that is not in the history
     finite.filter(lambda t: t not in (0.0, 0.5, 1.0)).map(lambda t: ("rollback", {"to_time": t})),
     # set_state with a state of the wrong size or with NaN
-    arrays().filter(lambda a: a.shape != (2,) or not np.all(np.isfinite(a))).map(
-        lambda a: ("set_state", {"time": 3.0, "state": a})
-    ),
+    arrays()
+    .filter(lambda a: a.shape != (2,) or not np.all(np.isfinite(a)))
+    .map(lambda a: ("set_state", {"time": 3.0, "state": a})),
     # configure with bad parameters (the old configuration must survive)
-    st.sampled_from([{"size": 0}, {"size": -1}, {"size": "two"}, {"size": [2]}, {"y0": [1.0, 2.0, 3.0]},
-                     {"size": 3, "y0": [1.0]}, {"y0": "zero"}, {"y0": None}]).map(
-        lambda p: ("configure", {"params": p})
-    ),
+    st.sampled_from(
+        [
+            {"size": 0},
+            {"size": -1},
+            {"size": "two"},
+            {"size": [2]},
+            {"y0": [1.0, 2.0, 3.0]},
+            {"size": 3, "y0": [1.0]},
+            {"y0": "zero"},
+            {"y0": None},
+        ]
+    ).map(lambda p: ("configure", {"params": p})),
 )
 
 
-@fuzz(500)
+@fuzz(300)
 @given(out_of_contract)
 def test_answer_out_of_contract_requests(case: tuple[str, dict]) -> None:
     cmd, args = case
@@ -682,7 +733,7 @@ def test_answer_out_of_contract_requests(case: tuple[str, dict]) -> None:
 # --- round trips -------------------------------------------------------------------------------
 
 
-@fuzz(1000)
+@fuzz(600)
 @given(st.data())
 def test_request_round_trip(data: st.DataObject) -> None:
     cmd = data.draw(st.sampled_from(COMMANDS))
@@ -713,7 +764,7 @@ def test_array_valued_parameters_travel_as_lists() -> None:
     assert math.copysign(1.0, out["y0"][0]) == -1.0
 
 
-@fuzz(300)
+@fuzz(200)
 @given(st.data())
 def test_reply_round_trip(data: st.DataObject) -> None:
     cmd = data.draw(st.sampled_from(sorted(RESULTS)))

@@ -106,7 +106,10 @@ def t_array(v: Any, path: str) -> np.ndarray:
         raise ProtocolError(
             "bad_request", f"{path}: shape {shape} needs {count * 8} bytes of float64, data has {len(data)}"
         )
-    return np.frombuffer(data, dtype=_F8).reshape(shape)
+    try:
+        return np.frombuffer(data, dtype=_F8).reshape(shape)
+    except ValueError:  # e.g. [0, 2**63]: no data, but numpy cannot index such a shape
+        raise ProtocolError("bad_request", f"{path}: shape {shape} is too large to address") from None
 
 
 def t_array_map(v: Any, path: str) -> dict[str, np.ndarray]:
