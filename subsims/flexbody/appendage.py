@@ -13,12 +13,15 @@ translational rows (3-5). The appendage returns tau_flex about c0 with
     J wdot + w x J w = tau0 - c0 x f0 + tau_flex
 
 exactly (no modelling error from the partition). Inertia split (C2): the attitude simulator uses J' = J - D
-and receives tau_split = tau_flex - D wdot - w x (D w), which removes the first-order algebraic loop.
+and receives tau_flex_split = tau_flex - D wdot - w x (D w), which removes the first-order algebraic loop.
 
 Mode B ("base"): a_O, w, wdot are all prescribed; the appendage returns the loads it exerts on the bus.
 """
 
 from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 
@@ -55,12 +58,12 @@ def appendage_accelerations(
     w: np.ndarray,
     wd: np.ndarray,
     fp: np.ndarray,
-    f_bus: np.ndarray | None = None,
+    F_bus: np.ndarray | None = None,
     a_O: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """(a_O, eta_ddot). Mode B: give ``a_O``. Mode C: give ``f_bus`` (force on the base) and a_O is solved from
+    """(a_O, eta_ddot). Mode B: give ``a_O``. Mode C: give ``F_bus`` (force on the base) and a_O is solved from
 
-        | m E3    A13  | |a_O     |   | f_bus + sum f^i - wdot x mc - w x (w x mc) - 2 w x sum m_i qdot_i |
+        | m E3    A13  | |a_O     |   | F_bus + sum f^i - wdot x mc - w x (w x mc) - 2 w x sum m_i qdot_i |
         | A13^T   E_t  | |eta_ddot| = | Phi^T [f^i - m_i e_i] - Omega^2 eta - C eta_dot                    |
     """
     q = deflections(model, eta)
@@ -71,7 +74,7 @@ def appendage_accelerations(
     if a_O is not None:
         return np.asarray(a_O, dtype=np.float64), solve_spd(model.M_eta, g - model.A13.T @ a_O)
     mc = model.mc0 + mi @ q
-    rhs_t = f_bus + fp.sum(0) - cross(wd, mc) - cross(w, cross(w, mc)) - 2.0 * cross(w, mi @ qd)
+    rhs_t = F_bus + fp.sum(0) - cross(wd, mc) - cross(w, cross(w, mc)) - 2.0 * cross(w, mi @ qd)
     t = model.t
     A = np.empty((3 + t, 3 + t))
     A[:3, :3] = model.m * np.eye(3)
@@ -98,7 +101,7 @@ def appendage_loads(
     F_int, T_int: force and torque about O_g exerted by the appendage on the base (sum of f^i - m_i a_i).
     F_rig, T_rig: the same for the rigid undeformed appendage (q = qdot = qddot = 0); F_flex, T_flex: differences.
     tau_flex: about c0, sum (rho_i - c0) x f^i - sum m_i [(rho_i - c0) x a_i - (r_i - c0) x a_i^0]; with ``D``
-    also tau_split = tau_flex - D wdot - w x (D w).
+    also tau_flex_split = tau_flex - D wdot - w x (D w).
     """
     q = deflections(model, eta)
     qd = deflections(model, eta_dot)
@@ -121,5 +124,15 @@ def appendage_loads(
     out["F_flex"] = out["F_int"] - out["F_rig"]
     out["T_flex"] = out["T_int"] - out["T_rig"]
     if D is not None:
-        out["tau_split"] = out["tau_flex"] - D @ wd - cross(w, D @ w)
+        out["tau_flex_split"] = out["tau_flex"] - D @ wd - cross(w, D @ w)
     return out
+
+
+def coupling_constants(params: Mapping[str, Any]) -> dict[str, Any]:
+    """Mode-C constants for a scenario, from flexbody parameters: c0, J, D, J_split = J - D (the inertia to give
+    the rigid attitude simulator when it receives ``tau_flex_split``), mu = rho(J^-1 D) (the plain C1 loop gain).
+    Values as nested lists (TOML-ready) except mu."""
+    from subsims.flexbody.config import build
+
+    consts = inertia_split(build({**params, "mode": "free"}).model)
+    return {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in consts.items()}

@@ -19,23 +19,25 @@ from subsims.flexbody.model import (
     split_state,
 )
 
-FREE_OUTPUTS = ("R", "euler123", "euler_zyx", "quat", "V", "omega", "omega_dot", "eta", "eta_dot", "q", "q_dot",
-                "kinetic_energy", "elastic_energy", "p_I", "H_O")
+FREE_OUTPUTS = ("R", "euler123", "euler_zyx", "quat", "V", "omega", "Vdot", "omega_dot", "eta", "eta_dot", "q", "q_dot",
+                "cm", "kinetic_energy", "elastic_energy", "p_I", "H_O")
 
 
 def free_outputs(
     model: FlexModel, times: np.ndarray, ys: np.ndarray, loads: Callable[[float, np.ndarray], Loads]
 ) -> dict[str, np.ndarray]:
-    """Mode "free" outputs at each sample (row of ``ys``); omega_dot uses the loads at the sample."""
+    """Mode "free" outputs at each sample (row of ``ys``); Vdot, omega_dot use the loads at the sample."""
     out: dict[str, list] = {name: [] for name in FREE_OUTPUTS}
     for tt, y in zip(times, ys):
         R, theta, eta, V, w, eta_dot, quat = split_state(y, model.t)
         P, H = momenta(model, y)
+        q = deflections(model, eta)
+        x = accelerations(model, V, w, eta, eta_dot, loads(float(tt), y))
         sample = {
             "R": R, "euler123": theta, "euler_zyx": euler_zyx_from_dcm(quat_to_dcm(quat)), "quat": quat,
-            "V": V, "omega": w, "omega_dot": accelerations(model, V, w, eta, eta_dot, loads(float(tt), y))[3:6],
-            "eta": eta, "eta_dot": eta_dot,
-            "q": deflections(model, eta).ravel(), "q_dot": deflections(model, eta_dot).ravel(),
+            "V": V, "omega": w, "Vdot": x[:3], "omega_dot": x[3:6], "eta": eta, "eta_dot": eta_dot,
+            "q": q.ravel(), "q_dot": deflections(model, eta_dot).ravel(),
+            "cm": (model.mc0 + model.masses @ q) / model.m,
             "kinetic_energy": [kinetic_energy(model, V, w, eta, eta_dot)],
             "elastic_energy": [elastic_energy(model, eta)],
             "p_I": P, "H_O": H,

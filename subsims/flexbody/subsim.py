@@ -5,13 +5,14 @@ All vectors are body axes unless marked inertial; unit labels follow ``units`` (
 
 mode "free" (the report's vehicle, spec mode F). State: the report's Y (8-4) + attitude quaternion.
   inputs   f0 (3) force at O_g; tau0 (3) torque about O_g; fp (3n) force on each particle (particle-major).
-  outputs  R (3, inertial), euler123 (3, rad, the report's 1-2-3 angles, continuous), quat (4, body->inertial,
-           scalar first), V (3), omega (3), omega_dot (3), eta, eta_dot (t), q, q_dot (3n), kinetic_energy (1),
+  outputs  R (3, inertial), euler123 (3, rad, the report's 1-2-3 angles, continuous), euler_zyx (3, rad, Nixon's
+           z-y-x angles of the same attitude), quat (4, body->inertial, scalar first), V (3), omega (3), Vdot (3),
+           omega_dot (3), eta, eta_dot (t; absent when t = 0), q, q_dot (3n), cm (3), kinetic_energy (1),
            elastic_energy (1), p_I (3, inertial linear momentum), H_O (3, inertial angular momentum about O).
 mode "attitude" (appendage under a rigid attitude simulator, spec mode C). State: (eta, eta_dot).
-  inputs   omega (3), omega_dot (3): the base's angular motion from the attitude simulator; f_bus (3) external
+  inputs   omega (3), omega_dot (3): the base's angular motion from the attitude simulator; F_bus (3) external
            force on the base (moves a_O only, default 0); fp (3n).
-  outputs  tau_flex (3) about c0, tau_split (3) = tau_flex - D wdot - w x D w (for an attitude simulator using
+  outputs  tau_flex (3) about c0, tau_flex_split (3) = tau_flex - D wdot - w x D w (for an attitude simulator using
            J - D), F_int, T_int (3, loads of the appendage on the base, torque about O_g), a_O (3), cm_shift (3),
            eta, eta_dot, q, q_dot, elastic_energy.
 mode "base" (prescribed base motion, spec mode B). State: (eta, eta_dot).
@@ -68,18 +69,20 @@ def _ports(setup: FlexSetup) -> tuple[dict[str, Port], dict[str, Port]]:
             "quat": Port(4, "", "attitude quaternion body->inertial (w, x, y, z)"),
             "V": Port(3, f"{L}/s", "inertial velocity of O_g, body axes"),
             "omega": Port(3, "rad/s", "body angular velocity, body axes"),
+            "Vdot": Port(3, f"{L}/s^2", "body-frame rate of V (inertial acceleration of O_g is Vdot + omega x V)"),
             "omega_dot": Port(3, "rad/s^2", "body angular acceleration"),
             **modal,
             **defl,
+            "cm": Port(3, L, "system mass centre from O_g, body axes, mc/m (3-4)"),
             "kinetic_energy": Port(1, E, "T = 1/2 U^T A U"),
             "p_I": Port(3, f"{u['mass']}*{L}/s", "linear momentum, inertial"),
             "H_O": Port(3, f"{u['mass']}*{L}^2/s", "angular momentum about the inertial origin, inertial"),
         }
     elif setup.mode == "attitude":
-        inputs = {**w_in, "f_bus": Port(3, F, "external force on the base, body axes"), **fp}
+        inputs = {**w_in, "F_bus": Port(3, F, "external force on the base, body axes"), **fp}
         outputs = {
             "tau_flex": Port(3, TQ, "flexible torque about the composite mass centre c0"),
-            "tau_split": Port(3, TQ, "tau_flex - D omega_dot - omega x D omega (attitude inertia J - D)"),
+            "tau_flex_split": Port(3, TQ, "tau_flex - D omega_dot - omega x D omega (attitude inertia J - D)"),
             "F_int": Port(3, F, "force of the appendage on the base"),
             "T_int": Port(3, TQ, "torque of the appendage on the base about O_g"),
             "a_O": Port(3, f"{L}/s^2", "inertial acceleration of O_g, body axes"),
@@ -172,7 +175,7 @@ class FlexBody(Subsim):
             d = self._read(u, tt)
             a_O, eta_dd = appendage_accelerations(
                 model, y[:t], y[t:], d["omega"], d["omega_dot"], d["fp"],
-                f_bus=d["f_bus"] if mode_c else None, a_O=None if mode_c else d["a_O"],
+                F_bus=d["F_bus"] if mode_c else None, a_O=None if mode_c else d["a_O"],
             )
             return d, a_O, eta_dd
 

@@ -28,7 +28,7 @@ def test_mode_c_reproduces_free_vehicle(seed, nt):
     eta, eta_dot = rng.normal(scale=0.02, size=nt), rng.normal(scale=0.05, size=nt)
     f0, tau0, fp = rng.normal(size=3), rng.normal(size=3), rng.normal(size=(4, 3))
     x = accelerations(model, V, w, eta, eta_dot, (f0, tau0, fp))
-    a_O, eta_dd = appendage_accelerations(model, eta, eta_dot, w, x[3:6], fp, f_bus=f0)
+    a_O, eta_dd = appendage_accelerations(model, eta, eta_dot, w, x[3:6], fp, F_bus=f0)
     np.testing.assert_allclose(eta_dd, x[6:], atol=1e-10 * max(1.0, np.abs(x[6:]).max()))
     np.testing.assert_allclose(a_O, x[:3] + cross(w, V), atol=1e-11)
     split = inertia_split(model)
@@ -36,9 +36,10 @@ def test_mode_c_reproduces_free_vehicle(seed, nt):
     loads = appendage_loads(model, eta, eta_dot, eta_dd, a_O, w, x[3:6], fp, split["D"])
     lhs = J @ x[3:6] + cross(w, J @ w)
     np.testing.assert_allclose(lhs, tau0 - cross(c0, f0) + loads["tau_flex"], atol=1e-8)
-    # split form: (J - D) wdot + w x (J - D) w = tau_ext + tau_split
+    # split form: (J - D) wdot + w x (J - D) w = tau_ext + tau_flex_split
     Jp = split["J_split"]
-    np.testing.assert_allclose(Jp @ x[3:6] + cross(w, Jp @ w), tau0 - cross(c0, f0) + loads["tau_split"], atol=1e-8)
+    rhs = tau0 - cross(c0, f0) + loads["tau_flex_split"]
+    np.testing.assert_allclose(Jp @ x[3:6] + cross(w, Jp @ w), rhs, atol=1e-8)
 
 
 def test_inertia_split_constants_of_the_sample():
@@ -59,11 +60,11 @@ def test_tau_flex_is_D_wdot_at_rest():
     zero_t, zero_p = np.zeros(4), np.zeros((4, 3))
     rng = np.random.default_rng(0)
     for wd in rng.normal(size=(5, 3)):
-        a_O, edd = appendage_accelerations(model, zero_t, zero_t, np.zeros(3), wd, zero_p, f_bus=np.zeros(3))
+        a_O, edd = appendage_accelerations(model, zero_t, zero_t, np.zeros(3), wd, zero_p, F_bus=np.zeros(3))
         tau = appendage_loads(model, zero_t, zero_t, edd, a_O, np.zeros(3), wd, zero_p, D)
         np.testing.assert_allclose(tau["tau_flex"], D @ wd, rtol=1e-12, atol=1e-12 * np.abs(D @ wd).max())
-        assert np.abs(tau["tau_split"]).max() < 1e-11
-    a_O, edd = appendage_accelerations(model, zero_t, zero_t, np.zeros(3), np.zeros(3), zero_p, f_bus=np.zeros(3))
+        assert np.abs(tau["tau_flex_split"]).max() < 1e-11
+    a_O, edd = appendage_accelerations(model, zero_t, zero_t, np.zeros(3), np.zeros(3), zero_p, F_bus=np.zeros(3))
     assert not np.any(appendage_loads(model, zero_t, zero_t, edd, a_O, np.zeros(3), np.zeros(3), zero_p)["tau_flex"])
 
 
@@ -139,18 +140,18 @@ def run_stage(fb, y, J, w, times, control, tau):
     tau_in = linear(times, tau)
     ws, wds = rigid_attitude(J, w, times, lambda t: control + tau_in(t))
     u_w, u_wd = linear(times, ws), linear(times, wds)
-    zeros = {"f_bus": np.zeros(3), "fp": np.zeros(12)}
+    zeros = {"F_bus": np.zeros(3), "fp": np.zeros(12)}
     out, y_end = fb.advance(y, times, lambda t: {"omega": u_w(t), "omega_dot": u_wd(t), **zeros})
     return ws, out, y_end
 
 
 def cosimulate_mode_c(t_end, split):
-    """Gauss-Seidel recursive feedback, attitude -> flexbody, on tau_split (C2) or tau_flex (C1)."""
+    """Gauss-Seidel recursive feedback, attitude -> flexbody, on tau_flex_split (C2) or tau_flex (C1)."""
     fb = FlexBody()
     y = fb.initial_state({**HEAVY_BUS, "mode": "attitude", "n_modes": 2})
     consts = inertia_split(fb.model)
     J = consts["J_split"] if split else consts["J"]
-    port = "tau_split" if split else "tau_flex"
+    port = "tau_flex_split" if split else "tau_flex"
     cp = ControlParams.from_mapping(BANG_BANG_SLEW)
     w, tau_last = np.zeros(3), np.zeros(3)
     log_w, log_q, stages = [], [], []
@@ -182,3 +183,11 @@ def test_mode_c_recursive_feedback_matches_monolithic(mono, split, t_end, max_st
     assert max(stages) <= max_stages, max(stages)
     assert np.abs(w - mono["omega"][:n]).max() <= 5e-7
     assert np.abs(q - mono["q"][:n]).max() <= 2e-5
+
+
+def test_coupling_constants_for_scenarios():
+    from subsims.flexbody.appendage import coupling_constants
+
+    c = coupling_constants(HEAVY_BUS)
+    np.testing.assert_allclose(np.array(c["J_split"]), np.diag([2640.75, 2000.0, 2640.75 - 617.1038]), atol=1e-4)
+    assert isinstance(c["J"], list) and abs(c["mu"] - 0.2337) < 1e-4
