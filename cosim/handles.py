@@ -90,8 +90,13 @@ class SubsimHandle:
     ) -> IntervalResult:
         return self.start_run_interval(times, inputs, interp)()
 
+    def start_commit(self) -> Callable[[], float]:
+        """Send ``commit`` now, wait later: a coordinator commits all subsims in one round trip."""
+        wait = self._begin("commit", {})
+        return lambda: wait()["time"]
+
     def commit(self) -> float:
-        return self._call("commit")["time"]
+        return self.start_commit()()
 
     def rollback(self, to_time: float | None = None) -> float:
         return self._call("rollback", **({} if to_time is None else {"to_time": float(to_time)}))["time"]

@@ -183,8 +183,8 @@ class Coordinator:
                     h.rollback()
                 if halvings == self.settings.max_halvings:
                     raise
-        for h in self.handles.values():
-            h.commit()
+        for wait in [h.start_commit() for h in self.handles.values()]:
+            wait()
         self._previous = {k: (interval.t, v) for k, v in interval.inputs.items()}
         interval.wall_time, interval.halvings = time.perf_counter() - started, halvings
         return interval
