@@ -34,7 +34,9 @@ def check_time_grid(times: np.ndarray, what: str = "times") -> np.ndarray:
     steps = np.diff(t)
     if np.any(steps <= 0):
         i = int(np.argmax(steps <= 0))
-        raise SegmentError(f"{what} must be strictly increasing: t[{i}]={t[i]!r} >= t[{i + 1}]={t[i + 1]!r}")
+        raise SegmentError(
+            f"{what} must be strictly increasing: t[{i}]={float(t[i])!r} >= t[{i + 1}]={float(t[i + 1])!r}"
+        )
     return t
 
 
@@ -62,7 +64,7 @@ class Segment:
             raise SegmentError(f"values must have shape ({t.size}, m) to match {t.size} times, got {v.shape}")
         if not np.all(np.isfinite(v)):
             i, j = np.argwhere(~np.isfinite(v))[0]
-            raise SegmentError(f"values[{i}, {j}] is {v[i, j]!r}: samples must be finite")
+            raise SegmentError(f"values[{i}, {j}] is {float(v[i, j])!r}: samples must be finite")
         m = v.shape[1]
         names = tuple(names) if names is not None else tuple(f"y[{j}]" for j in range(m))
         units = tuple(units) if units is not None else ("",) * m
@@ -104,7 +106,8 @@ def _linear(times: np.ndarray, values: np.ndarray) -> Interpolant:
     def at(t: float) -> np.ndarray:
         i = min(max(bisect.bisect_right(grid, t) - 1, 0), n - 2)
         w = (t - grid[i]) / (grid[i + 1] - grid[i])
-        return values[i] + w * (values[i + 1] - values[i])
+        # exact at both ends of the step (w = 0 or 1), and no overflow of values[i + 1] - values[i]
+        return (1.0 - w) * values[i] + w * values[i + 1]
 
     return at
 
@@ -118,10 +121,10 @@ def _barycentric(nodes: np.ndarray, vals: np.ndarray) -> Interpolant:
     xs = x.tolist()
 
     def at(t: float) -> np.ndarray:
-        d = t - x
         if t in xs:
             return vals[xs.index(t)].copy()
-        c = w / d
+        d = t - x
+        c = w * (np.abs(d).min() / d)  # scaled: w / d overflows when t is within rounding of a node
         return (c @ vals) / c.sum()
 
     return at

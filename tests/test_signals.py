@@ -1,0 +1,290 @@
+"""Signal segments (cosim.signals): validation messages, polynomial exactness, exact samples.
+
+Each interpolation scheme reproduces polynomials up to a known degree (``SCHEMES``): linear 1,
+cubic 3, lagrange n-1 for n samples. The tests check that degree exactly (1e-12 relative, at
+arbitrary times inside the segment, uniform and non-uniform grids, several channels) and check
+that one degree more is *not* reproduced, so a scheme that silently degrades fails here.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from cosim.signals import SCHEMES, Segment, SegmentError, check_time_grid
+
+props = settings(
+    max_examples=200, derandomize=True, database=None, deadline=None, suppress_health_check=[HealthCheck.too_slow]
+)
+RTOL = 1e-12
+
+# --- validation -----------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("times", "values", "match"),
+    [
+        ([0.0, 1.0, 2.0], [[1.0], [2.0]], r"values must have shape \(3, m\) to match 3 times, got \(2, 1\)"),
+        ([0.0, 1.0], [[[1.0]], [[2.0]]], r"values must have shape \(2, m\).*got \(2, 1, 1\)"),
+        ([0.0, 1.0], [], r"values must have shape \(2, m\).*got \(0, 1\)"),
+        ([0.0, 1.0, 2.0], [[0.0, 1.0], [np.nan, 1.0], [0.0, 1.0]], r"values\[1, 0\] is nan: samples must be finite"),
+        ([0.0, 1.0], [[0.0, np.inf], [0.0, 0.0]], r"values\[0, 1\] is inf: samples must be finite"),
+        ([0.0, 1.0], [[0.0], [-np.inf]], r"values\[1, 0\] is -inf: samples must be finite"),
+        ([0.0, np.nan, 2.0], [[0.0], [1.0], [2.0]], r"times contains NaN or inf at index 1"),
+        ([0.0, 1.0, np.inf], [[0.0], [1.0], [2.0]], r"times contains NaN or inf at index 2"),
+        ([0.0, 2.0, 1.0], [[0.0], [1.0], [2.0]], r"strictly increasing: t\[1\]=2\.0 >= t\[2\]=1\.0"),
+        ([0.0, 1.0, 1.0, 2.0], [[0.0], [1.0], [1.0], [2.0]], r"strictly increasing: t\[1\]=1\.0 >= t\[2\]=1\.0"),
+        ([], [], r"times must be a non-empty 1-D array, got shape \(0,\)"),
+        ([[0.0, 1.0]], [[0.0], [1.0]], r"times must be a non-empty 1-D array, got shape \(1, 2\)"),
+    ],
+    ids=[
+        "too-few-rows",
+        "3-d-values",
+        "empty-values",
+        "nan-value",
+        "inf-value",
+        "minus-inf-value",
+        "nan-time",
+        "inf-time",
+        "non-monotonic",
+        "duplicate-time",
+        "empty",
+        "2-d-times",
+    ],
+)
+def test_invalid_segments_say_what_is_wrong(times, values, match) -> None:
+    with pytest.raises(SegmentError, match=match):
+        Segment(times, values)
+
+
+def test_names_and_units_must_match_the_channels() -> None:
+    with pytest.raises(SegmentError, match=r"2 channels need 2 names and units, got 1 and 2"):
+        Segment([0.0, 1.0], [[0.0, 1.0], [1.0, 2.0]], names=["x"], units=["m", "m"])
+    seg = Segment([0.0, 1.0], [[0.0, 1.0], [1.0, 2.0]])
+    assert seg.names == ("y[0]", "y[1]") and seg.units == ("", "")
+
+
+def test_unknown_scheme_names_the_known_ones() -> None:
+    with pytest.raises(SegmentError, match=r"unknown interpolation scheme 'spline'; known: linear, cubic, lagrange"):
+        Segment([0.0, 1.0], [0.0, 1.0]).interpolant("spline")
+
+
+def test_segment_error_is_a_value_error_and_the_segment_is_read_only() -> None:
+    assert issubclass(SegmentError, ValueError)
+    seg = Segment([0.0, 1.0], [0.0, 1.0])
+    assert seg.values.shape == (2, 1)  # 1-D values are one channel
+    with pytest.raises(ValueError):
+        seg.values[0, 0] = 5.0
+    with pytest.raises(ValueError):
+        seg.times[0] = 5.0
+
+
+@props
+@given(
+    st.lists(st.floats(-1e6, 1e6), min_size=2, max_size=10, unique=True).map(sorted),
+    st.data(),
+)
+def test_first_non_increasing_step_is_reported(grid: list[float], data: st.DataObject) -> None:
+    i = data.draw(st.integers(0, len(grid) - 2))
+    bad = list(grid)
+    bad[i + 1] = data.draw(st.sampled_from([bad[i], bad[i] - 1.0, -1e7]))  # duplicate, or going back
+    if i + 2 < len(bad):
+        bad[i + 2 :] = [x + 2e7 for x in bad[i + 2 :]]  # everything after the fault increases again
+    with pytest.raises(SegmentError, match=rf"strictly increasing: t\[{i}\]=.* >= t\[{i + 1}\]="):
+        check_time_grid(np.array(bad))
+
+
+# --- grids and polynomials -------------------------------------------------------------------------
+
+
+@st.composite
+def grids(draw: st.DrawFn, n: int, uniform: bool) -> np.ndarray:
+    """n strictly increasing times; non-uniform steps differ by up to a factor of 5."""
+    t0 = draw(st.one_of(st.just(0.0), st.floats(-1e3, 1e3)))
+    span = draw(st.floats(1e-3, 1e3))
+    if uniform:
+        t = np.linspace(t0, t0 + span, n)
+    else:
+        steps = np.array(draw(st.lists(st.floats(0.2, 1.0), min_size=n - 1, max_size=n - 1)))
+        t = t0 + span * np.concatenate([[0.0], np.cumsum(steps) / steps.sum()])
+    assert np.all(np.diff(t) > 0)
+    return t
+
+
+def polynomial(coeffs: np.ndarray, t: np.ndarray | float, centre: float, scale: float) -> np.ndarray:
+    """Channels sum_k c[k, j] s**k with s = (t - centre) / scale (a polynomial in t of degree len(c) - 1)."""
+    s = (np.asarray(t, dtype=float) - centre) / scale
+    return np.stack([np.polynomial.polynomial.polyval(s, coeffs[:, j]) for j in range(coeffs.shape[1])], axis=-1)
+
+
+def coefficients(degree: int, channels: int) -> st.SearchStrategy:
+    """Random coefficients whose top-degree term is not negligible (|c_d| >= 0.1)."""
+    lower = st.lists(st.floats(-1.0, 1.0), min_size=degree * channels, max_size=degree * channels)
+    top = st.lists(
+        st.floats(0.1, 1.0).flatmap(lambda x: st.sampled_from([x, -x])), min_size=channels, max_size=channels
+    )
+    return st.tuples(lower, top).map(lambda lt: np.array(lt[0] + lt[1]).reshape(degree + 1, channels))
+
+
+def eval_points(t: np.ndarray, fracs: list[float]) -> np.ndarray:
+    """Arbitrary times inside [t[0], t[-1]] (clipped: t0 + f (tn - t0) can round past tn)."""
+    return np.clip(t[0] + np.array(fracs) * (t[-1] - t[0]), t[0], t[-1])
+
+
+def max_error(scheme: str, t: np.ndarray, coeffs: np.ndarray, at: np.ndarray) -> float:
+    """Largest error of ``scheme`` on the sampled polynomial, relative to the polynomial's size."""
+    centre, scale = 0.5 * (t[0] + t[-1]), t[-1] - t[0]
+    f = Segment(t, polynomial(coeffs, t, centre, scale)).interpolant(scheme)
+    got = np.array([f(x) for x in at])
+    want = polynomial(coeffs, at, centre, scale)
+    size = np.abs(coeffs).sum()  # bounds |p| on the segment, where |s| <= 1/2
+    return float(np.max(np.abs(got - want)) / size)
+
+
+FRACS = st.lists(st.floats(0.0, 1.0), min_size=1, max_size=12)
+CHANNELS = st.integers(1, 4)
+UNIFORM = st.booleans()
+
+
+@props
+@given(st.integers(2, 12), UNIFORM, CHANNELS, st.data())
+def test_linear_reproduces_degree_1(n: int, uniform: bool, m: int, data: st.DataObject) -> None:
+    t = data.draw(grids(n, uniform))
+    err = max_error("linear", t, data.draw(coefficients(1, m)), eval_points(t, data.draw(FRACS)))
+    assert err <= RTOL
+
+
+@props
+@given(st.integers(4, 12), UNIFORM, CHANNELS, st.data())
+def test_cubic_reproduces_degree_3(n: int, uniform: bool, m: int, data: st.DataObject) -> None:
+    t = data.draw(grids(n, uniform))
+    err = max_error("cubic", t, data.draw(coefficients(3, m)), eval_points(t, data.draw(FRACS)))
+    assert err <= RTOL
+
+
+@props
+@given(st.integers(2, 3), UNIFORM, CHANNELS, st.data())
+def test_cubic_on_fewer_than_four_samples_is_the_full_polynomial(
+    n: int, uniform: bool, m: int, data: st.DataObject
+) -> None:
+    t = data.draw(grids(n, uniform))
+    at = eval_points(t, data.draw(FRACS))
+    assert max_error("cubic", t, data.draw(coefficients(n - 1, m)), at) <= RTOL
+    values = np.array(data.draw(st.lists(st.floats(-1e3, 1e3), min_size=n * m, max_size=n * m))).reshape(n, m)
+    seg = Segment(t, values)
+    for x in at:
+        np.testing.assert_array_equal(seg(x, "cubic"), seg(x, "lagrange"))
+
+
+@pytest.mark.parametrize("scheme", list(SCHEMES))
+def test_one_sample_is_a_constant(scheme: str) -> None:
+    seg = Segment([2.0], [[1.5, -3.0]])
+    for x in (2.0, 1.0, 3.0):
+        np.testing.assert_array_equal(seg(x, scheme), [1.5, -3.0])
+
+
+@props
+@given(st.integers(2, 8), UNIFORM, CHANNELS, st.data())
+def test_lagrange_reproduces_degree_n_minus_1(n: int, uniform: bool, m: int, data: st.DataObject) -> None:
+    t = data.draw(grids(n, uniform))
+    err = max_error("lagrange", t, data.draw(coefficients(n - 1, m)), eval_points(t, data.draw(FRACS)))
+    assert err <= RTOL
+
+
+def midpoints(t: np.ndarray) -> np.ndarray:
+    return 0.5 * (t[:-1] + t[1:])
+
+
+# one degree more than a scheme reproduces must leave an error far above the exactness tolerance
+NOT_EXACT = 1e3 * RTOL
+
+
+@props
+@given(st.integers(2, 12), UNIFORM, CHANNELS, st.data())
+def test_linear_does_not_reproduce_degree_2(n: int, uniform: bool, m: int, data: st.DataObject) -> None:
+    t = data.draw(grids(n, uniform))
+    assert max_error("linear", t, data.draw(coefficients(2, m)), midpoints(t)) > NOT_EXACT
+
+
+@props
+@given(st.integers(5, 12), UNIFORM, CHANNELS, st.data())
+def test_cubic_does_not_reproduce_degree_4(n: int, uniform: bool, m: int, data: st.DataObject) -> None:
+    t = data.draw(grids(n, uniform))
+    assert max_error("cubic", t, data.draw(coefficients(4, m)), midpoints(t)) > NOT_EXACT
+
+
+@props
+@given(st.integers(2, 8), UNIFORM, CHANNELS, st.data())
+def test_lagrange_does_not_reproduce_degree_n(n: int, uniform: bool, m: int, data: st.DataObject) -> None:
+    t = data.draw(grids(n, uniform))
+    assert max_error("lagrange", t, data.draw(coefficients(n, m)), midpoints(t)) > NOT_EXACT
+
+
+@pytest.mark.parametrize("scheme", list(SCHEMES))
+def test_schemes_reach_exactly_their_documented_degree(scheme: str) -> None:
+    """SCHEMES states each scheme's degree; a fixed 9-point non-uniform grid confirms it both ways."""
+    t = np.array([0.0, 0.1, 0.35, 0.4, 0.7, 1.0, 1.1, 1.6, 2.0])
+    degree = SCHEMES[scheme] if SCHEMES[scheme] is not None else t.size - 1
+    at = np.linspace(0.0, 2.0, 41)
+    ones = np.ones((degree + 2, 1))
+    assert max_error(scheme, t, ones[: degree + 1], at) <= RTOL
+    assert max_error(scheme, t, ones, at) > NOT_EXACT
+
+
+# --- samples are returned exactly ----------------------------------------------------------------------
+
+finite = st.floats(allow_nan=False, allow_infinity=False)
+
+
+# grids like [0.0, 5e-324] are valid but their barycentric weights overflow (a warning when the
+# interpolant is built); only the sample times themselves are evaluated here
+@pytest.mark.filterwarnings("ignore:divide by zero:RuntimeWarning")
+@pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
+@props
+@given(
+    st.lists(st.floats(-1e6, 1e6), min_size=1, max_size=10, unique=True).map(sorted),
+    CHANNELS,
+    st.sampled_from(list(SCHEMES)),
+    st.data(),
+)
+def test_interpolation_at_sample_times_returns_the_samples(
+    grid: list[float], m: int, scheme: str, data: st.DataObject
+) -> None:
+    n = len(grid)
+    values = np.array(data.draw(st.lists(finite, min_size=n * m, max_size=n * m))).reshape(n, m)
+    seg = Segment(grid, values)
+    f = seg.interpolant(scheme)
+    for i, ti in enumerate(seg.times):
+        np.testing.assert_array_equal(f(ti), values[i], err_msg=f"{scheme} at t[{i}]={ti!r}")
+        np.testing.assert_array_equal(f(float(ti)), values[i])
+
+
+def test_linear_last_sample_is_exact() -> None:
+    """a + 1.0 * (b - a) is not always b in floating point: 0.2 + (0.9 - 0.2) == 0.9000000000000001."""
+    seg = Segment([0.0, 1.0], [[0.2], [0.9]])
+    assert seg(1.0, "linear")[0] == 0.9
+
+
+@pytest.mark.parametrize("scheme", list(SCHEMES))
+def test_huge_samples_do_not_overflow(scheme: str) -> None:
+    seg = Segment([0.0, 1.0, 2.0, 3.0], [[1e308], [-1e308], [1e308], [-1.5e308]])
+    for i, t in enumerate(seg.times):
+        assert seg(t, scheme)[0] == seg.values[i, 0]
+    if scheme == "linear":
+        assert seg(0.5, scheme)[0] == 0.0 and seg(2.5, scheme)[0] == -0.25e308
+
+
+@pytest.mark.parametrize("scheme", ["cubic", "lagrange"])
+def test_times_a_rounding_error_away_from_a_sample(scheme: str) -> None:
+    """Between samples, arbitrarily close to one: still finite and equal to the sample to rounding."""
+    t = np.array([0.0, 0.25, 0.5, 1.0, 1.5])
+    values = np.array([[1.0, -2.0], [2.0, 0.5], [3.0, 1.0], [0.5, 4.0], [-1.0, 2.0]])
+    f = Segment(t, values).interpolant(scheme)
+    for i, ti in enumerate(t):
+        for x in (ti + 5e-324, ti - 5e-324, math.nextafter(ti, math.inf), math.nextafter(ti, -math.inf)):
+            if t[0] <= x <= t[-1]:
+                np.testing.assert_allclose(f(x), values[i], rtol=1e-12, atol=1e-12)
