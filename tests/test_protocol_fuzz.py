@@ -32,7 +32,9 @@ sees the same inputs on every run):
 from __future__ import annotations
 
 import math
+import re
 import struct
+from pathlib import Path
 from typing import Any
 
 import msgpack
@@ -771,3 +773,16 @@ def test_reply_round_trip(data: st.DataObject) -> None:
     result = data.draw(valid_fields(RESULTS[cmd]))
     decoded = decode_reply(cmd, encode_result(result))
     assert _same(result, decoded)
+
+
+def test_worked_example_in_the_docs_matches_the_encoder() -> None:
+    """docs/protocol.md section 9 shows these bytes; they must stay what the code produces."""
+    doc = (Path(__file__).resolve().parents[1] / "docs" / "protocol.md").read_text()
+    shown = {m[0]: bytes.fromhex(m[1]) for m in re.findall(r"<!-- example-(\w+) -->\n```\n([0-9a-f]+)\n```", doc)}
+    request = encode_request(
+        "run_interval", {"t": np.array([0.0, 0.5]), "inputs": {"u": np.array([[1.0], [2.0]])}, "interp": "linear"}
+    )
+    assert shown["request"] == request
+    rt = Runtime(Integrator(), "integrator")
+    rt.configure({})
+    assert shown["reply"] == answer(rt, request) == answer(rt, request)
