@@ -86,7 +86,12 @@ def incidence(v_body: np.ndarray) -> tuple[float, float, float]:
     speed = float(np.sqrt(v_body[0] ** 2 + v_body[1] ** 2 + v_body[2] ** 2))  # VMAG
     if speed == 0.0:
         return 0.0, 0.0, 0.0
-    alpha = float(np.arccos(min(1.0, max(-1.0, v_body[0] / speed))))  # ALPHA = ACOS(V(1)/|V|)
+    # The listing's ALPHA = ACOS(V(1)/|V|), written as atan2(|V_lateral|, V(1)): equal in exact arithmetic,
+    # but ACOS turns a 1-ulp error of V(1)/|V| into an angle error of 1e-16/sin(alpha), which near 0 and
+    # 180 deg (the drogue and the SRB after about 30 s) is round-off noise in the loads of 1e-5 lbf*ft,
+    # enough to stall a coupled iteration that checks them. atan2 keeps full relative precision.
+    lateral = float(np.sqrt(v_body[1] ** 2 + v_body[2] ** 2))
+    alpha = float(np.arctan2(lateral, v_body[0]))
     phia = ztan2(v_body[1], v_body[2])  # PHIA = ZTAN2(V(2), V(3))
     return speed, alpha, phia
 
