@@ -96,6 +96,12 @@ def open_session(
                 check_couplings(scenario.couplings[: i + 1], inputs, outputs)
             except ValueError as exc:
                 raise ScenarioError(f"{scenario.path}: [couplings[{i}]] {exc}") from None
+        signals = {f"{n}.{p}" for n, d in session.descriptions.items() for p in [*d.inputs, *d.outputs]}
+        for name in scenario.settings_for().tolerances:
+            if name not in signals:
+                raise ScenarioError(f"{scenario.path}: [tolerances.{name!r}] no subsim has a signal {name!r} "
+                                    "(tolerances name outputs, checked by centralized runs, or coupled inputs, "
+                                    "checked by distributed runs)")
     except BaseException:
         session.close()
         raise

@@ -81,6 +81,7 @@ def test_load_errors_name_the_key(tmp_path: Path, old: str, new: str, key: str, 
         ('from = ["a.y"]\ntransform = "linear"\nparams = { gains = [[[1.0, 0.0]]] }', 'from = "a.y"',
          "couplings[1]", "size mismatch"),
         ("params = { size = 2 }", "params = { size = 2, y0 = [1.0] }", "subsims.a.params", "y0"),
+        ("[[couplings]]", '[tolerances."a.yy"]\nabs = 1.0\n[[couplings]]', "tolerances.'a.yy'", "no subsim"),
     ],
 )
 def test_signal_errors_found_when_ports_are_known_name_the_key(
