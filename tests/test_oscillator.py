@@ -17,7 +17,9 @@ SCENARIO = Path(__file__).parents[1] / "scenarios" / "oscillator.toml"
 
 def variant(method: str, **settings) -> Scenario:
     sc = load(SCENARIO)
-    return dataclasses.replace(sc, settings={**sc.settings, method: dataclasses.replace(sc.settings[method], **settings)})
+    return dataclasses.replace(
+        sc, settings={**sc.settings, method: dataclasses.replace(sc.settings[method], **settings)}
+    )
 
 
 def exact(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -66,8 +68,9 @@ def test_energy_stays_at_ten_pi_squared(tmp_path: Path, method: str) -> None:
 def test_distributed_needs_fewer_stages_than_centralized(tmp_path: Path) -> None:
     stages = {}
     for method in ("centralized", "distributed"):
-        rep = run_scenario(load(SCENARIO), method=method, stop=0.5, output=tmp_path / f"{method}.csv",
-                           inprocess=True, progress=False)
+        rep = run_scenario(
+            load(SCENARIO), method=method, stop=0.5, output=tmp_path / f"{method}.csv", inprocess=True, progress=False
+        )
         s = rep.summary
         stages[method] = sum(k * v for k, v in s.stages.items()) / s.intervals
     assert stages["distributed"] < stages["centralized"]
