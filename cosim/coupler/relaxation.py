@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from cosim.coupler.convergence import Tolerance, check
+from cosim.coupler.convergence import Check, Tolerance, check
 from cosim.coupler.couplings import Coupling, SignalRef, check_couplings, derive_order, feedback_weight, is_feedback
 from cosim.coupler.first_guess import POLICIES, first_guess
 from cosim.handles import Description, SubsimHandle
@@ -205,6 +205,13 @@ class Coordinator:
     def _evaluate(self, c: Coupling, outputs: Mapping, n: int) -> np.ndarray:
         return c.evaluate(outputs, self.sizes[c.target], n)
 
+    def _check(self, new: dict, old: dict, history: dict[str, list[float]]) -> Check:
+        """The convergence check of one stage; appends each signal's largest residual to ``history``."""
+        result = check(new, old, self.settings.tol, self.settings.tolerances)
+        for k, r in result.residuals.items():
+            history.setdefault(k, []).append(float(r.max(initial=0.0)))
+        return result
+
     def _centralized(self, times: np.ndarray) -> Interval:
         n, s = times.size, self.settings
         inputs = self._guess(times, self.couplings)
@@ -220,9 +227,7 @@ class Coordinator:
                 self.on_stage(stage, outputs)
             flat = {f"{name}.{p}": v for name, ports in outputs.items() for p, v in ports.items()}
             if previous is not None:
-                result = check(flat, previous, s.tol, s.tolerances)
-                for k, r in result.residuals.items():
-                    history.setdefault(k, []).append(float(r.max(initial=0.0)))
+                result = self._check(flat, previous, history)
                 if result.converged:
                     return Interval(times, outputs, inputs, stage + 1, history)
             previous = flat
@@ -248,9 +253,7 @@ class Coordinator:
             if not self.feedback:  # nothing to iterate: feed-forward chain is exact in one stage
                 return Interval(times, outputs, inputs, stage + 1, history)
             if stage > 0:
-                result = check(new, fed_back, s.tol, s.tolerances)
-                for k, r in result.residuals.items():
-                    history.setdefault(k, []).append(float(r.max(initial=0.0)))
+                result = self._check(new, fed_back, history)
                 if result.converged:
                     return Interval(times, outputs, inputs, stage + 1, history)
             fed_back = new
