@@ -1,0 +1,199 @@
+"""The paper's nine runs: cases 1-3 x RF-C / RF-D (over Zenoh, real processes) / RK-U (spec §9, §10).
+
+    python benchmarks/paper_runs.py                      # all nine, 60,000 s each (hours over Zenoh)
+    python benchmarks/paper_runs.py --stop 2000          # shortened
+    python benchmarks/paper_runs.py --cases 3 --stop 60000
+    python benchmarks/paper_runs.py --analyze-only       # re-read the result files in --out
+
+Runs go one after the other (so wall times compare) in the order unified, distributed, centralized for
+each case; results stream to ``<out>/case<N>-<method>.csv`` (+ ``.diag.csv``) and the timings to
+``<out>/timings.json``, so an interrupted benchmark can still be analysed (over the rows every run of a
+case has). Prints, per case:
+
+* wall and CPU time of each run (CPU = this process + its reaped subsim processes) and the speed ratios
+  distributed/unified and centralized/unified (paper, CPU: RF-D ~800 s, RF-C ~1,200 s, RK-U ~200 s, so
+  at most 4x and 6x);
+* the stages-per-interval histogram (stage 0 included; the listings' nit is stages-1 for RF-D and
+  stages-2 for RF-C, see tests/satellite/test_paper_claims.py);
+* the largest deviation from the unified reference in each 1,000 s window: Euler angles (deg, the
+  range-limited output angles as plotted in the paper, differences wrapped to +-180) and position (m);
+* the time at which the deviation first exceeds 1 deg (the paper: case 3 at about 45,000 s).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import resource
+import sys
+import time
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from cosim.results import read_results  # noqa: E402
+from cosim.runner import run_scenario  # noqa: E402
+from cosim.scenario import load  # noqa: E402
+from cosim.unified import run_unified  # noqa: E402
+from subsims.satellite.transforms import limit_angles  # noqa: E402
+
+METHODS = ("unified", "distributed", "centralized")
+SHORT = {"unified": "RK-U", "distributed": "RF-D", "centralized": "RF-C"}
+
+
+def cpu_seconds() -> float:
+    own, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
+
+
+def run_one(case: int, method: str, stop: float, out: Path, inprocess: bool) -> dict:
+    scenario = load(ROOT / "scenarios" / "satellite" / f"case{case}.toml")
+    output = out / f"case{case}-{method}.csv"
+    wall, cpu = time.perf_counter(), cpu_seconds()
+    if method == "unified":
+        report = run_unified(scenario, stop=stop, output=output)
+    else:
+        report = run_scenario(scenario, method=method, stop=stop, output=output, inprocess=inprocess,
+                              progress=True, log=lambda m: None)
+    wall, cpu = time.perf_counter() - wall, cpu_seconds() - cpu
+    return {"wall_s": wall, "cpu_s": cpu, "stop": stop, "t_end": report.summary.t_end,
+            "intervals": report.summary.intervals, "stages": dict(report.summary.stages),
+            "transport": "in-process" if inprocess or method == "unified" else "zenoh"}
+
+
+def stages_histogram(diag: Path) -> Counter:
+    with diag.open() as f:
+        return Counter(int(row["stages"]) for row in csv.DictReader(f))
+
+
+def load_case(out: Path, case: int) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """{method: (t, limited Euler angles deg (n, 3), R m (n, 3))} of the result files that exist."""
+    runs = {}
+    for method in METHODS:
+        path = out / f"case{case}-{method}.csv"
+        if not path.exists() or path.stat().st_size == 0:
+            continue
+        columns, data = read_results(path)
+        if data.shape[0] == 0:
+            continue
+        phi = data[:, [columns.index(f"attitude.phi[{i}]") for i in range(3)]]
+        r = data[:, [columns.index(f"orbit.R[{i}]") for i in range(3)]]
+        runs[method] = (data[:, 0], np.degrees(limit_angles(phi)), r)
+    return runs
+
+
+def angle_diff(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Largest component difference of limited Euler angles (deg), wrapped to [-180, 180): (n,)."""
+    return np.max(np.abs((a - b + 180.0) % 360.0 - 180.0), axis=1)
+
+
+def deviations(runs: dict, a: str, b: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(t, angle deviation deg, position deviation m) over the rows both runs have."""
+    n = min(runs[a][0].size, runs[b][0].size)
+    ta, tb = runs[a][0][:n], runs[b][0][:n]
+    if not np.allclose(ta, tb, rtol=0, atol=1e-6):
+        raise SystemExit(f"time columns of {a} and {b} differ: not the same run length or grid")
+    return ta, angle_diff(runs[a][1][:n], runs[b][1][:n]), np.max(np.abs(runs[a][2][:n] - runs[b][2][:n]), axis=1)
+
+
+def windowed(t: np.ndarray, dev: np.ndarray, width: float) -> list[tuple[float, float]]:
+    k = np.floor((t - 1e-9) / width).clip(min=0).astype(int)
+    return [(w * width, float(dev[k == w].max())) for w in np.unique(k)]
+
+
+def first_exceeding(t: np.ndarray, dev: np.ndarray, level: float) -> float | None:
+    above = np.flatnonzero(dev > level)
+    return float(t[above[0]]) if above.size else None
+
+
+def report_case(case: int, out: Path, timings: dict, window: float, level: float) -> None:
+    print(f"\n=== case {case} ===")
+    for method in METHODS:
+        tm = timings.get(f"case{case}-{method}")
+        diag = out / f"case{case}-{method}.diag.csv"
+        if tm is None and not diag.exists():
+            continue
+        hist = stages_histogram(diag) if diag.exists() else Counter()
+        line = f"  {SHORT[method]:5s}"
+        if tm:
+            line += (f" wall {tm['wall_s']:9.1f} s  cpu {tm['cpu_s']:9.1f} s  to t = {tm['t_end']:g} s "
+                     f"({tm['transport']})")
+        else:
+            line += " (no timing: interrupted?)"
+        if method != "unified":
+            line += "  stages/interval: " + ", ".join(f"{k}: {v}" for k, v in sorted(hist.items()))
+        print(line)
+    u = timings.get(f"case{case}-unified")
+    for method in ("distributed", "centralized"):
+        tm = timings.get(f"case{case}-{method}")
+        if u and tm and tm["stop"] == u["stop"]:
+            print(f"  speed {SHORT[method]}/RK-U: wall {tm['wall_s'] / u['wall_s']:.1f}x, "
+                  f"cpu {tm['cpu_s'] / u['cpu_s']:.1f}x   (paper, CPU: {'4' if method == 'distributed' else '6'}x)")
+
+    runs = load_case(out, case)
+    pairs = [(m, "unified") for m in ("distributed", "centralized") if m in runs and "unified" in runs]
+    if "distributed" in runs and "centralized" in runs:
+        pairs.append(("centralized", "distributed"))
+    if not pairs:
+        return
+    devs = {p: deviations(runs, *p) for p in pairs}
+    names = [f"{SHORT[a]}-{SHORT[b]}" for a, b in pairs]
+    print(f"  largest deviation per {window:g} s window: Euler angles (deg) | position (m)")
+    print("  " + f"{'window s':>15s}" + "".join(f"  {n + ' deg':>13s} {n + ' m':>11s}" for n in names))
+    tables = {p: (windowed(d[0], d[1], window), windowed(d[0], d[2], window)) for p, d in devs.items()}
+    for i in range(max(len(v[0]) for v in tables.values())):
+        row = ""
+        for p in pairs:
+            ang, pos = tables[p]
+            row += f"  {ang[i][1]:13.3e} {pos[i][1]:11.3e}" if i < len(ang) else " " * 27
+        start = next(v[0][i][0] for v in tables.values() if i < len(v[0]))
+        print(f"  {start:7g}-{start + window:<7g}" + row)
+    for p, (t, ang, pos) in devs.items():
+        first = first_exceeding(t, ang, level)
+        name = f"{SHORT[p[0]]} vs {SHORT[p[1]]}"
+        when = f"first exceeds {level:g} deg at t = {first:.1f} s" if first is not None else \
+            f"never exceeds {level:g} deg up to t = {t[-1]:g} s"
+        print(f"  {name}: {when}; overall max {ang.max():.3e} deg, {pos.max():.3e} m")
+    if case == 3:
+        print("  (paper: RF-C and RF-D agree with RK-U for about 45,000 s, then diverge from it while still "
+              "agreeing with each other)")
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--stop", type=float, default=60000.0, help="problem time of every run, s (paper: 60000)")
+    p.add_argument("--cases", type=int, nargs="+", default=[1, 2, 3], choices=[1, 2, 3])
+    p.add_argument("--methods", nargs="+", default=list(METHODS), choices=METHODS)
+    p.add_argument("--out", type=Path, default=ROOT / "results" / "paper", help="result directory")
+    p.add_argument("--inprocess", action="store_true", help="coupled runs in this process (no Zenoh)")
+    p.add_argument("--analyze-only", action="store_true", help="only analyse the result files in --out")
+    p.add_argument("--window", type=float, default=1000.0, help="deviation window, s")
+    p.add_argument("--level", type=float, default=1.0, help="deviation of interest, deg")
+    args = p.parse_args(argv)
+    args.out.mkdir(parents=True, exist_ok=True)
+    timing_file = args.out / "timings.json"
+    timings = json.loads(timing_file.read_text()) if timing_file.exists() else {}
+    if not args.analyze_only:
+        for case in args.cases:
+            for method in (m for m in METHODS if m in args.methods):
+                key = f"case{case}-{method}"
+                timings.pop(key, None)
+                timing_file.write_text(json.dumps(timings, indent=1))
+                print(f"running case {case} {method} to t = {args.stop:g} s ...", file=sys.stderr, flush=True)
+                timings[key] = run_one(case, method, args.stop, args.out, args.inprocess)
+                timing_file.write_text(json.dumps(timings, indent=1))
+                tm = timings[key]
+                print(f"  case {case} {SHORT[method]}: {tm['wall_s']:.1f} s wall, {tm['cpu_s']:.1f} s cpu",
+                      file=sys.stderr, flush=True)
+    for case in args.cases:
+        report_case(case, args.out, timings, args.window, args.level)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

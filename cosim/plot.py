@@ -1,0 +1,228 @@
+"""``cosim plot``: result files (.csv/.npz) to PNG, several files (methods, cases) overlaid on one axis.
+
+* Every output signal ``<subsim>.<port>`` gets ``<out>/<subsim>.<port>.png``: one panel per component
+  against time, one line per file that has it (``--signals`` selects columns or prefixes).
+* Files of the paper's satellite (columns ``attitude.phi``, ``attitude.omega``, ``orbit.R``) also get,
+  unless ``--signals`` is given, the paper's figures: ``satellite-euler.png`` (Euler angles, deg,
+  range-limited as the listings print them; figs. 8-10), ``satellite-rates.png`` (body rates, deg/s;
+  figs. 11-13) and ``satellite-altitude.png`` (|R|/1000 - 6367.65 km; figs. 14-19: pass the RF-D and
+  RK-U files of all cases for the case-method overlay of figs. 17-19).
+
+Lines are labelled with the file names. Long runs are drawn through a min/max envelope per pixel
+column, so 600,000 samples plot fast and oscillations do not alias away. matplotlib is an optional
+dependency (``pip install 'cosim[plot]'``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import re
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from cosim.results import read_results
+
+SATELLITE = ("attitude.phi", "attitude.omega", "orbit.R")
+REARTH_KM = 6367.65  # the paper's Earth radius (spec §7.1), for the altitude output
+MAX_POINTS = 4000  # envelope buckets per line
+_COLUMN = re.compile(r"^(?P<signal>[^\[]+)\[(?P<index>\d+)\]$")
+
+
+class PlotError(RuntimeError):
+    pass
+
+
+def _pyplot():
+    try:
+        import matplotlib
+    except ImportError:
+        raise PlotError("cosim plot needs matplotlib, an optional dependency: pip install 'cosim[plot]'") from None
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+class Result:
+    """One result file: its label, time column and signals {"subsim.port": (n, size)}."""
+
+    def __init__(self, path: Path) -> None:
+        if not path.exists():
+            raise PlotError(f"result file {path} not found")
+        try:
+            columns, data = read_results(path)
+        except (ValueError, OSError, KeyError, StopIteration) as exc:
+            raise PlotError(f"{path}: not a cosim result file ({exc})") from None
+        if not columns or columns[0] != "time":
+            raise PlotError(f"{path}: not a cosim result file (first column must be 'time')")
+        self.path, self.label = path, path.stem
+        self.t = data[:, 0]
+        parts: dict[str, list[tuple[int, int]]] = {}
+        for j, name in enumerate(columns[1:], start=1):
+            m = _COLUMN.match(name)
+            signal, index = (m["signal"], int(m["index"])) if m else (name, 0)
+            parts.setdefault(signal, []).append((index, j))
+        self.signals = {s: data[:, [j for _, j in sorted(cols)]] for s, cols in parts.items()}
+
+    def window(self, t0: float | None, t1: float | None) -> None:
+        """Keep the samples with t0 <= t <= t1 (None: open end)."""
+        keep = np.ones(self.t.size, dtype=bool)
+        if t0 is not None:
+            keep &= self.t >= t0
+        if t1 is not None:
+            keep &= self.t <= t1
+        self.t = self.t[keep]
+        self.signals = {s: v[keep] for s, v in self.signals.items()}
+
+    @property
+    def is_satellite(self) -> bool:
+        return all(s in self.signals and self.signals[s].shape[1] == 3 for s in SATELLITE)
+
+
+def envelope(t: np.ndarray, y: np.ndarray, points: int = MAX_POINTS) -> tuple[np.ndarray, np.ndarray]:
+    """(t, y) reduced to the min and max of each of ``points`` buckets, in time order."""
+    n = t.size
+    if n <= 2 * points:
+        return t, y
+    size = math.ceil(n / points)
+    pad = (-n) % size
+    tb = np.concatenate([t, np.full(pad, t[-1])]).reshape(-1, size)
+    yb = np.concatenate([y, np.full(pad, y[-1])]).reshape(-1, size)
+    lo, hi = yb.argmin(axis=1), yb.argmax(axis=1)
+    first, second = np.minimum(lo, hi), np.maximum(lo, hi)
+    rows = np.arange(tb.shape[0])
+    tt = np.column_stack([tb[rows, first], tb[rows, second]]).ravel()
+    yy = np.column_stack([yb[rows, first], yb[rows, second]]).ravel()
+    return tt, yy
+
+
+def _limited_angles_deg(phi: np.ndarray) -> np.ndarray:
+    """The listings' output range limiting (dcm321 then dcm2ang321, spec §4.4/§6.2), rad -> deg."""
+    s1, s2, s3 = np.sin(phi).T
+    c1, c2, c3 = np.cos(phi).T
+    a12, a13, a11 = c2 * s3, -s2, c2 * c3
+    a23, a33 = s1 * c2, c1 * c2
+    return np.degrees(np.column_stack([np.arctan2(a23, a33), np.arctan2(-a13, np.hypot(a11, a12)),
+                                       np.arctan2(a12, a11)]))
+
+
+def break_wraps(t: np.ndarray, y: np.ndarray, jump: float) -> tuple[np.ndarray, np.ndarray]:
+    """Insert a gap where y jumps by more than ``jump`` (angles wrapping at +-180 deg)."""
+    at = np.flatnonzero(np.abs(np.diff(y)) > jump) + 1
+    return np.insert(t, at, np.nan), np.insert(y, at, np.nan)
+
+
+def _figure(plt, results: Sequence[Result], series: list[np.ndarray], title: str, ylabels: Sequence[str],
+            path: Path, wrap: float | None = None) -> Path:
+    """One panel per column of the series; one line per result (gaps at jumps > ``wrap``)."""
+    rows = len(ylabels)
+    fig, axes = plt.subplots(rows, 1, sharex=True, figsize=(10, 2.4 * rows + 0.8), squeeze=False)
+    for k, ax in enumerate(axes[:, 0]):
+        for r, y in zip(results, series):
+            t, v = envelope(r.t, y[:, k])
+            if wrap is not None:
+                t, v = break_wraps(t, v, wrap)
+            ax.plot(t, v, label=r.label, linewidth=0.8)
+        ax.set_ylabel(ylabels[k])
+        ax.grid(True, alpha=0.3)
+        ax.ticklabel_format(axis="y", useOffset=False)
+    axes[0, 0].set_title(title)
+    axes[0, 0].legend(fontsize="small", loc="best")
+    axes[-1, 0].set_xlabel("time (s)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def plot_satellite(results: Sequence[Result], out: Path) -> list[Path]:
+    """The paper's figures: Euler angles, body rates, altitude, every file overlaid."""
+    plt = _pyplot()
+    sat = [r for r in results if r.is_satellite]
+    if not sat:
+        return []
+    written = [
+        _figure(plt, sat, [_limited_angles_deg(r.signals["attitude.phi"]) for r in sat],
+                "Euler angles (range-limited output)", ["phi_x (deg)", "phi_y (deg)", "phi_z (deg)"],
+                out / "satellite-euler.png", wrap=180.0),
+        _figure(plt, sat, [np.degrees(r.signals["attitude.omega"]) for r in sat], "Body rates",
+                ["omega_x (deg/s)", "omega_y (deg/s)", "omega_z (deg/s)"], out / "satellite-rates.png"),
+        _figure(plt, sat, [np.linalg.norm(r.signals["orbit.R"], axis=1, keepdims=True) / 1000.0 - REARTH_KM
+                           for r in sat], "Altitude", ["altitude (km)"], out / "satellite-altitude.png"),
+    ]
+    return written
+
+
+def _selected(signal: str, size: int, wanted: Sequence[str] | None) -> list[int]:
+    """Components of ``signal`` picked by ``--signals`` (a column like ``x[1]`` or a prefix like ``x``)."""
+    if not wanted:
+        return list(range(size))
+    picked = []
+    for i in range(size):
+        column = f"{signal}[{i}]"
+        if any(column == w or column.startswith(w) for w in wanted):
+            picked.append(i)
+    return picked
+
+
+def plot_signals(results: Sequence[Result], out: Path, wanted: Sequence[str] | None = None) -> list[Path]:
+    """Generic: one PNG per output signal, one panel per (selected) component, every file overlaid."""
+    plt = _pyplot()
+    order: dict[str, int] = {}
+    for r in results:
+        for s, v in r.signals.items():
+            order[s] = max(order.get(s, 0), v.shape[1])
+    written = []
+    for signal, size in order.items():
+        comps = _selected(signal, size, wanted)
+        if not comps:
+            continue
+        having = [r for r in results if signal in r.signals and r.signals[signal].shape[1] == size]
+        name = re.sub(r"[^A-Za-z0-9_.-]", "_", signal)
+        written.append(_figure(plt, having, [r.signals[signal][:, comps] for r in having], signal,
+                               [f"{signal}[{i}]" for i in comps], out / f"{name}.png"))
+    return written
+
+
+def plot_files(paths: Sequence[Path], out: Path, signals: Sequence[str] | None = None,
+               window: Sequence[float | None] | None = None) -> list[Path]:
+    """Plot result files into ``out``; returns the PNGs written. Raises PlotError.
+
+    ``window`` = (t0, t1) restricts the time axis (e.g. (40000, 60000) for the paper's figs. 8-16).
+    """
+    _pyplot()
+    results = [Result(Path(p)) for p in paths]
+    if window is not None:
+        for r in results:
+            r.window(*window)
+    empty = [r.label for r in results if r.t.size == 0]
+    if empty:
+        raise PlotError(f"no samples in {', '.join(empty)}{' inside the window' if window is not None else ''}")
+    out.mkdir(parents=True, exist_ok=True)
+    written = [] if signals else plot_satellite(results, out)
+    written += plot_signals(results, out, signals)
+    if not written:
+        raise PlotError(f"nothing matches --signals {' '.join(signals or [])}")
+    return written
+
+
+def plot_command(args: argparse.Namespace) -> int:
+    """``cosim plot RESULTS... [--out DIR] [--signals ...]`` (and ``args.window`` = (t0, t1) if present)."""
+    paths = [p for p in args.results if not p.name.endswith(".diag.csv")]
+    for p in args.results:
+        if p not in paths:
+            print(f"cosim plot: skipping diagnostics file {p}", file=sys.stderr)
+    try:
+        if not paths:
+            raise PlotError("no result files given (only diagnostics files)")
+        written = plot_files(paths, args.out, args.signals, getattr(args, "window", None))
+    except PlotError as exc:
+        print(f"cosim plot: {exc}", file=sys.stderr)
+        return 2
+    for path in written:
+        print(path)
+    return 0

@@ -1,0 +1,112 @@
+"""The unified (single-integrator) reference of a scenario: ``cosim run <scenario> --method unified``.
+
+A scenario names its reference in ``[unified] function = "package.module:function"`` (optional
+``[unified] params = {...}`` are passed on as keyword arguments). The function is called as
+
+    fn(params, stop=..., dt=..., start=..., couplings=[{"to", "from", "transform", "params"}, ...], **params)
+
+with ``params`` = ``{subsim: its [subsims.<name>.params]}`` and ``dt`` = interval / (samples - 1) of
+the scenario's default method, and returns ``{"t": (n,), subsim: {output port: (n, size)}}`` sampled
+every ``dt``. The samples are written in the SAME columns as a coupled run (``ResultWriter``, one
+interval per convergence interval, ``stages`` = 1 in the diagnostics), so results compare column by
+column. The run covers whole intervals past ``stop``, as the coupler does.
+"""
+
+from __future__ import annotations
+
+import importlib
+import math
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from cosim.coupler.relaxation import Interval, RunSummary
+from cosim.runner import RunReport, default_output, open_session, output_signals
+from cosim.scenario import Scenario, ScenarioError
+
+
+def resolve_function(scenario: Scenario) -> Any:
+    name = scenario.unified
+    if not name:
+        raise ScenarioError(f"{scenario.path}: no [unified] function: this scenario has no unified reference")
+    module_name, sep, attr = str(name).partition(":")
+    if not sep or not module_name or not attr:
+        raise ScenarioError(f"{scenario.path}: [unified.function] {name!r} must be 'package.module:function'")
+    try:
+        fn = getattr(importlib.import_module(module_name), attr)
+    except (ImportError, AttributeError) as exc:
+        raise ScenarioError(f"{scenario.path}: [unified.function] {name!r} not found ({exc})") from None
+    if not callable(fn):
+        raise ScenarioError(f"{scenario.path}: [unified.function] {name!r} is not callable")
+    return fn
+
+
+def run_unified(scenario: Scenario, stop: float | None = None, output: Path | None = None) -> RunReport:
+    """Run the scenario's unified reference and write it like a coupled run. Raises ScenarioError."""
+    fn = resolve_function(scenario)
+    table = scenario.raw.get("unified", {})
+    extra = table.get("params", {}) if isinstance(table, dict) else {}
+    if not isinstance(extra, dict):
+        raise ScenarioError(f"{scenario.path}: [unified.params] must be a table")
+    settings = scenario.settings_for()
+    stop = scenario.stop if stop is None else float(stop)
+    output = Path(output) if output is not None else default_output(scenario, "unified")
+    H, m = settings.interval, settings.samples
+    dt = H / (m - 1)
+    start = scenario.start
+    n_int = max(1, math.ceil((stop - start) / H - 1e-9))  # whole intervals past stop, as Coordinator.run
+    n_steps = n_int * (m - 1)
+    couplings = [dict(c) for c in scenario.raw.get("couplings", [])]
+    params = {name: dict(spec.params) for name, spec in scenario.subsims.items()}
+
+    session = open_session(scenario, inprocess=True)  # the coupled run's output ports and sizes
+    try:
+        signals = output_signals(scenario, session.descriptions)
+    finally:
+        session.close()
+
+    started = time.perf_counter()
+    try:
+        # stop half a step short of the last sample: the function rounds up to whole steps
+        result = fn(params, stop=start + (n_steps - 0.5) * dt, dt=dt, start=start, couplings=couplings, **extra)
+    except (ValueError, TypeError, KeyError) as exc:
+        raise ScenarioError(f"{scenario.path}: [unified.function] {scenario.unified}: {exc}") from None
+    wall = time.perf_counter() - started
+
+    columns: dict[str, np.ndarray] = {}
+    for ref, size in signals:
+        try:
+            v = np.asarray(result[ref.subsim][ref.port], dtype=np.float64)
+        except (KeyError, TypeError):
+            raise ScenarioError(f"{scenario.path}: [unified.function] {scenario.unified} returned no "
+                                f"{ref} (the coupled run writes it)") from None
+        v = v.reshape(v.shape[0], -1) if v.ndim else v
+        if v.shape != (n_steps + 1, size):
+            raise ScenarioError(f"{scenario.path}: [unified.function] {ref} has shape {v.shape}, "
+                                f"expected ({n_steps + 1}, {size})")
+        columns[str(ref)] = v
+
+    from cosim.results import ResultWriter, diag_path
+
+    summary = RunSummary(start)
+    writer = ResultWriter(output, signals)
+    frac = np.arange(m) / (m - 1)
+    try:
+        for k in range(n_int):
+            t0, t1 = start + k * H, start + (k + 1) * H  # Coordinator.run's grid and sample_times
+            t = t0 + (t1 - t0) * frac
+            t[0], t[-1] = t0, t1
+            rows = slice(k * (m - 1), (k + 1) * (m - 1) + 1)
+            outputs: dict[str, dict[str, np.ndarray]] = {}
+            for ref, _ in signals:
+                outputs.setdefault(ref.subsim, {})[ref.port] = columns[str(ref)][rows]
+            interval = Interval(t, outputs, {}, 1, {}, wall_time=wall / n_int)
+            writer.write(interval)
+            summary.add(interval)
+    finally:
+        writer.close()
+    summary.wall_time = wall
+    return RunReport("unified", summary, output, diag_path(output), list(scenario.subsims), [],
+                     {"dt": dt, "function": scenario.unified})
