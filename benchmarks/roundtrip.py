@@ -1,0 +1,356 @@
+"""Round trip of one ``run_interval``: the framework against bare Zenoh.
+
+    python benchmarks/roundtrip.py [--samples 1000] [--warmup 200] [--rounds 10]
+
+The request: an integrator subsim of size 6 (configured with y0 = zeros), interval [0, 0.4] with 5
+samples, a 5x6 input segment, linear interpolation. ``run_interval`` commits nothing, so the same
+request is repeated. Three ways, interleaved in rounds so that load drifts hit all of them alike:
+
+  (a) remote   RemoteHandle -> Zenoh -> a spawned ``python -m subsims.integrator`` (cosim.launch.Bus)
+  (b) inproc   InProcessHandle: the same Runtime called directly
+  (c) bare     session.get of the same request bytes -> Zenoh -> a spawned bare queryable that
+               answers with a fixed payload of the real reply's size (same session settings, same
+               FifoChannel-on-the-main-thread serving loop as cosim's CommandServer)
+  (d) status   RemoteHandle.status() to the same process: the framework's fixed cost per request
+               (envelope, codec, dispatch) without the model's work
+
+Then the framework overhead ratio (a)/(c), and where the framework's time goes: each stage of the
+request path timed in this process. Prints figures; asserts nothing.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import signal
+import statistics
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import zenoh
+
+from cosim.handles import InProcessHandle
+from cosim.launch import Bus
+from cosim.protocol.bus import client_config, coordinator_alive_key
+from cosim.protocol.messages import decode_reply, decode_request, encode_request, encode_result
+from cosim.protocol.server import answer
+from cosim.runtime import Runtime
+from cosim.signals import check_time_grid
+from subsims.integrator.model import gauss_nodes
+from subsims.integrator.subsim import Integrator
+
+SIZE, N = 6, 5
+PARAMS = {"size": SIZE, "y0": [0.0] * SIZE}
+TIMES = np.linspace(0.0, 0.4, N)
+INPUTS = {"u": np.random.default_rng(2024).normal(size=(N, SIZE))}
+STOP = b"stop"
+
+
+# --- the bare Zenoh responder (runs in its own process) ----------------------------------------------
+
+
+def bare_key(run: str) -> str:
+    return f"cosim/{run}/bare/rpc"
+
+
+def serve_bare(endpoint: str, run: str, reply_size: int) -> int:
+    """Answer every query on the bare key with ``reply_size`` fixed bytes until told to stop."""
+
+    def stop(signum: int, frame: object) -> None:
+        raise SystemExit(0)
+
+    signal.signal(signal.SIGTERM, stop)
+    reply = bytes(range(256)) * (reply_size // 256) + bytes(reply_size % 256)
+    with zenoh.open(client_config(endpoint, 10.0)) as session:
+        queryable = session.declare_queryable(bare_key(run), zenoh.handlers.FifoChannel(64))
+        # exit with the coordinator, as real subsims do
+        watch = session.liveliness().declare_subscriber(
+            coordinator_alive_key(run),
+            lambda s: os.kill(os.getpid(), signal.SIGTERM) if s.kind == zenoh.SampleKind.DELETE else None,
+        )
+        token = session.liveliness().declare_token(f"cosim/{run}/bare/alive")
+        try:
+            while True:
+                query = queryable.recv()
+                with query:
+                    payload = query.payload.to_bytes() if query.payload is not None else b""
+                    if payload == STOP:
+                        query.reply(query.key_expr, b"bye")
+                        return 0
+                    query.reply(query.key_expr, reply)
+        finally:
+            token.undeclare()
+            watch.undeclare()
+            queryable.undeclare()
+
+
+def serve_timed(endpoint: str, run: str, name: str) -> int:
+    """The integrator subsim process, with ``answer()`` timed (wall and CPU) in the process itself.
+
+    Prints the medians of the run_interval requests as one JSON line on stdout when it exits.
+    """
+    import json
+
+    import cosim.protocol.server as server
+    from cosim.process import main as serve_model
+
+    untimed = server.answer
+    wall: list[float] = []
+    cpu: list[float] = []
+
+    def timed(runtime: Runtime, payload: bytes) -> bytes:
+        w0, c0 = time.perf_counter_ns(), time.thread_time_ns()
+        reply = untimed(runtime, payload)
+        if payload[:40].find(b"run_interval") >= 0:
+            wall.append((time.perf_counter_ns() - w0) / 1e3)
+            cpu.append((time.thread_time_ns() - c0) / 1e3)
+        return reply
+
+    server.answer = timed  # CommandServer.serve looks the name up at each request
+    rc = serve_model(Integrator, ["--connect", endpoint, "--run", run, "--name", name])
+    print(json.dumps({"n": len(wall), "wall": wall, "cpu": cpu}), flush=True)
+    return rc
+
+
+def in_situ(bus: Bus, warmup: int, count: int) -> tuple[list[float], list[float], list[float]]:
+    """(client round trips, answer() wall times, answer() CPU times) of run_interval, in microseconds."""
+    import json
+
+    name = "integ-timed"
+    popen = subprocess.Popen(
+        [sys.executable, str(Path(__file__).resolve()), "--timed-subsim", bus.endpoint, bus.run, name],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.DEVNULL,
+        text=True,
+    )
+    try:
+        handle = bus.attach(name, wait=20.0)
+        handle.configure(PARAMS)
+        call = lambda: handle.run_interval(TIMES, INPUTS)  # noqa: E731
+        sample(call, warmup)
+        rtt = sample(call, count)
+        handle.shutdown()
+        handle.close()
+        out, _ = popen.communicate(timeout=10.0)
+    finally:
+        if popen.poll() is None:
+            popen.kill()
+            popen.wait()
+    stats = json.loads(out.strip().splitlines()[-1])
+    return rtt, stats["wall"][warmup:], stats["cpu"][warmup:]
+
+
+class BareClient:
+    """The coordinator half of (c): exactly what RemoteHandle does, minus encoding and decoding."""
+
+    def __init__(self, bus: Bus, reply_size: int) -> None:
+        self.session, self.key = bus.session, bare_key(bus.run)
+        self.popen = subprocess.Popen(
+            [sys.executable, str(Path(__file__).resolve()), "--bare-server", bus.endpoint, bus.run, str(reply_size)]
+        )
+        deadline = time.monotonic() + 20.0
+        while not self._answers(b"ping"):  # declarations propagate asynchronously
+            if self.popen.poll() is not None or time.monotonic() > deadline:
+                self.close()
+                raise RuntimeError("the bare responder did not come up")
+            time.sleep(0.02)
+
+    def _answers(self, payload: bytes) -> bool:
+        replies = self.session.get(self.key, payload=payload, timeout=1.0)
+        return any(r.ok is not None for r in replies)
+
+    def call(self, payload: bytes) -> bytes:
+        for reply in self.session.get(
+            self.key, payload=payload, timeout=10.0, consolidation=zenoh.ConsolidationMode.NONE
+        ):
+            return reply.ok.payload.to_bytes()
+        raise RuntimeError("no reply from the bare responder")
+
+    def close(self) -> None:
+        try:
+            if self.popen.poll() is None:
+                self._answers(STOP)
+            self.popen.wait(3.0)
+        except Exception:
+            self.popen.terminate()
+            try:
+                self.popen.wait(3.0)
+            except subprocess.TimeoutExpired:
+                self.popen.kill()
+                self.popen.wait()
+
+
+# --- measurement ---------------------------------------------------------------------------------------
+
+
+def sample(fn: Callable[[], object], count: int) -> list[float]:
+    """Wall time of each of ``count`` calls, in microseconds."""
+    out = []
+    for _ in range(count):
+        t0 = time.perf_counter_ns()
+        fn()
+        out.append((time.perf_counter_ns() - t0) / 1e3)
+    return out
+
+
+def per_call(fn: Callable[[], object], batch: int = 200, batches: int = 15) -> float:
+    """Median over batches of the mean CPU time per call, in microseconds.
+
+    CPU time of this thread, not wall time: other processes competing for the cores do not
+    inflate it, so the stages add up even on a loaded machine.
+    """
+    times = []
+    for _ in range(batches):
+        t0 = time.thread_time_ns()
+        for _ in range(batch):
+            fn()
+        times.append((time.thread_time_ns() - t0) / batch / 1e3)
+    return statistics.median(times)
+
+
+def pct(xs: list[float], q: float) -> float:
+    return float(np.percentile(xs, q))
+
+
+def breakdown(request: bytes, reply: bytes) -> list[tuple[str, float]]:
+    """Each stage of the framework's request path, timed in this process (microseconds per call)."""
+    rt = Runtime(Integrator(), "integ")
+    rt.configure(PARAMS)
+    args = decode_request(request).args
+    times, inputs = args["t"], args["inputs"]
+    u = rt._input_function(times, inputs, "linear")
+    calls = [0]
+
+    def counting(t: float) -> dict:
+        calls[0] += 1
+        return u(t)
+
+    outputs, end_state = rt.model.advance(rt.state, times, counting)
+    result = rt.run_interval(times, inputs)
+    return [
+        (
+            "client  encode_request",
+            per_call(lambda: encode_request("run_interval", {"t": TIMES, "inputs": INPUTS, "interp": "linear"})),
+        ),
+        ("subsim  decode_request (msgpack + schema check)", per_call(lambda: decode_request(request))),
+        ("subsim  check_time_grid(t)", per_call(lambda: check_time_grid(times, "t"))),
+        (
+            "subsim  Runtime._input_function (checks, Segment, interpolant)",
+            per_call(lambda: rt._input_function(times, inputs, "linear")),
+        ),
+        ("subsim  model.advance total (integrate_once)", per_call(lambda: rt.model.advance(rt.state, times, u))),
+        ("          of which gauss_nodes(5): numpy leggauss, per call", per_call(lambda: gauss_nodes(times.size))),
+        (f"          of which {calls[0]} input evaluations u(t)", calls[0] * per_call(lambda: u(0.13))),
+        (
+            "subsim  Runtime._check_outputs + _check_state",
+            per_call(lambda: (rt._check_outputs(outputs, times), rt._check_state(end_state, SIZE, "returned"))),
+        ),
+        ("subsim  Runtime.run_interval total", per_call(lambda: rt.run_interval(times, inputs))),
+        ("subsim  encode_result", per_call(lambda: encode_result(result))),
+        ("subsim  answer() total (decode + run + encode)", per_call(lambda: answer(rt, request))),
+        ("client  decode_reply", per_call(lambda: decode_reply("run_interval", reply))),
+    ]
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--samples", type=int, default=1000, help="timed calls per way (>= 500)")
+    p.add_argument("--warmup", type=int, default=200, help="untimed calls per way first")
+    p.add_argument("--rounds", type=int, default=10, help="interleaved rounds the samples are split into")
+    p.add_argument("--bare-server", nargs=3, metavar=("ENDPOINT", "RUN", "REPLY_SIZE"), help=argparse.SUPPRESS)
+    p.add_argument("--timed-subsim", nargs=3, metavar=("ENDPOINT", "RUN", "NAME"), help=argparse.SUPPRESS)
+    a = p.parse_args(argv)
+    if a.bare_server:
+        endpoint, run, size = a.bare_server
+        return serve_bare(endpoint, run, int(size))
+    if a.timed_subsim:
+        return serve_timed(*a.timed_subsim)
+
+    request = encode_request("run_interval", {"t": TIMES, "inputs": INPUTS, "interp": "linear"})
+    reference = Runtime(Integrator(), "integ")
+    reference.configure(PARAMS)
+    reply = answer(reference, request)
+
+    with Bus.open() as bus:
+        remote = bus.spawn("subsims.integrator", "integ", quiet=True).handle
+        remote.configure(PARAMS)
+        inproc = InProcessHandle(Integrator(), "integ")
+        inproc.configure(PARAMS)
+        bare = BareClient(bus, len(reply))
+        try:
+            # the three ways must agree before their times mean anything
+            r_remote, r_inproc = remote.run_interval(TIMES, INPUTS), inproc.run_interval(TIMES, INPUTS)
+            assert r_remote.outputs["y"].tobytes() == r_inproc.outputs["y"].tobytes()
+            assert len(bare.call(request)) == len(reply)
+            ways: dict[str, Callable[[], object]] = {
+                "(a) remote handle, spawned process": lambda: remote.run_interval(TIMES, INPUTS),
+                "(b) in-process handle": lambda: inproc.run_interval(TIMES, INPUTS),
+                "(c) bare zenoh get/reply, same bytes": lambda: bare.call(request),
+                "(d) remote handle, status (no model work)": remote.status,
+            }
+            for fn in ways.values():
+                sample(fn, a.warmup)
+            samples: dict[str, list[float]] = {name: [] for name in ways}
+            per_round = -(-a.samples // a.rounds)
+            for _ in range(a.rounds):
+                for name, fn in ways.items():
+                    samples[name] += sample(fn, per_round)
+        finally:
+            bare.close()
+        rtt, srv_wall, srv_cpu = in_situ(bus, a.warmup, a.samples)
+
+    load = os.getloadavg()
+    print(f"run_interval round trip: integrator size {SIZE}, {N} samples over [0, 0.4], input segment {N}x{SIZE}")
+    print(
+        f"request {len(request)} B, reply {len(reply)} B; {a.warmup} warm-up + {per_round * a.rounds} timed calls "
+        f"per way in {a.rounds} interleaved rounds; load average {load[0]:.2f} on {os.cpu_count()} CPUs"
+    )
+    print()
+    print(f"| {'way':<42} | median (us) | p90 (us) | samples |")
+    print(f"|{'-' * 44}|-------------|----------|---------|")
+    for name, xs in samples.items():
+        print(f"| {name:<42} | {pct(xs, 50):11.1f} | {pct(xs, 90):8.1f} | {len(xs):7d} |")
+    ra, _, rc, _ = samples.values()
+    med = pct(ra, 50) / pct(rc, 50)
+    print()
+    print(
+        f"framework overhead (a)/(c): median {med:.2f}x, p90 {pct(ra, 90) / pct(rc, 90):.2f}x "
+        f"(target <= 1.50x: {'met' if med <= 1.5 else 'NOT met'})"
+    )
+    print(f"framework time per call, median (a) - (c): {pct(ra, 50) - pct(rc, 50):.1f} us")
+    print()
+    print("(a) again, against an integrator process that times answer() itself (medians, us):")
+    print(
+        f"  round trip at the client {pct(rtt, 50):.1f}; inside the subsim: answer() wall {pct(srv_wall, 50):.1f}, "
+        f"CPU {pct(srv_cpu, 50):.1f}; so transport + client side {pct(rtt, 50) - pct(srv_wall, 50):.1f} "
+        f"(bare zenoh (c): {pct(rc, 50):.1f})"
+    )
+    print()
+    print("where the framework's time goes (CPU time per call in this process, median of batch means):")
+    print(f"| {'stage':<64} | us/call |")
+    print(f"|{'-' * 66}|---------|")
+    stages = breakdown(request, reply)
+    for name, us in stages:
+        print(f"| {name:<64} | {us:7.1f} |")
+    us = [x for _, x in stages]
+    codec = us[0] + us[1] + us[9] + us[11]
+    runtime = us[8] - us[4]  # run_interval minus the model's advance: validation, interpolant set-up, checks
+    evaluations = us[6]
+    model = us[4] - evaluations
+    framework = codec + runtime + evaluations
+    print()
+    share = 100 * framework / pct(rc, 50)
+    print(
+        f"framework work per request: codec {codec:.1f} + runtime checks and set-up {runtime:.1f} + input "
+        f"evaluations {evaluations:.1f} = {framework:.1f} us = {share:.0f}% of bare zenoh (c)"
+    )
+    print(f"the integrator's own arithmetic: {model:.1f} us, of which recomputing its Gauss nodes {us[5]:.1f}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
