@@ -4,7 +4,7 @@
 
 The request: an integrator subsim of size 6 (configured with y0 = zeros), interval [0, 0.4] with 5
 samples, a 5x6 input segment, linear interpolation. ``run_interval`` commits nothing, so the same
-request is repeated. Three ways, interleaved in rounds so that load drifts hit all of them alike:
+request is repeated. Four ways, interleaved in rounds so that load drifts hit all of them alike:
 
   (a) remote   RemoteHandle -> Zenoh -> a spawned ``python -m subsims.integrator`` (cosim.launch.Bus)
   (b) inproc   InProcessHandle: the same Runtime called directly
@@ -14,8 +14,9 @@ request is repeated. Three ways, interleaved in rounds so that load drifts hit a
   (d) status   RemoteHandle.status() to the same process: the framework's fixed cost per request
                (envelope, codec, dispatch) without the model's work
 
-Then the framework overhead ratio (a)/(c), and where the framework's time goes: each stage of the
-request path timed in this process. Prints figures; asserts nothing.
+Then the framework overhead ratio (a)/(c); (a) once more against an integrator process that times
+its own ``answer()`` (server work vs transport); and where the framework's time goes: the CPU time of
+each stage of the request path, in this process. Prints figures; asserts nothing.
 """
 
 from __future__ import annotations

@@ -97,7 +97,6 @@ leaves = st.one_of(
     st.booleans(),
     INT64,
     st.floats(),  # includes NaN, inf, -0.0, subnormals
-    st.floats(width=32).map(np.float32).map(float),
     st.text(max_size=12),
     st.binary(max_size=24),
     st.builds(msgpack.ExtType, st.integers(0, 127), st.binary(max_size=8)),
@@ -786,3 +785,14 @@ def test_worked_example_in_the_docs_matches_the_encoder() -> None:
     rt = Runtime(Integrator(), "integrator")
     rt.configure({})
     assert shown["reply"] == answer(rt, request) == answer(rt, request)
+
+
+def test_numbers_may_be_any_msgpack_int_or_float() -> None:
+    """docs/protocol.md: a *number* is a msgpack int or a float 32/64; a boolean is not a number."""
+    for t0, packed_as in [(0.5, "float32"), (0.5, "float64"), (3, "int")]:
+        payload = msgpack.packb(
+            {"v": 1, "cmd": "configure", "args": {"params": {}, "t0": t0}}, use_single_float=packed_as == "float32"
+        )
+        assert (b"\xca" in payload) == (packed_as == "float32")
+        assert decode_request(payload).args["t0"] == t0
+    expect_protocol_error(pack({"v": 1, "cmd": "configure", "args": {"params": {}, "t0": True}}), {"bad_request"})
