@@ -111,7 +111,7 @@ class Runtime:
             raise CosimError("model_error", f"configure: {exc}") from None
         except (ValueError, KeyError, TypeError) as exc:
             raise CosimError("bad_value", f"configure: bad parameter: {exc}") from None
-        state = self._check_state(state, None, "initial_state() returned state")
+        state = self._check_state(state, None, "initial_state() for these parameters gave a state that")
         self.model, self.inputs, self.outputs = model, inputs, outputs
         self._set_committed(t0, state)
         self.history.clear()
@@ -138,7 +138,10 @@ class Runtime:
         except Exception as exc:
             raise CosimError("internal", f"advance raised {type(exc).__name__}: {exc}") from None
         checked = self._check_outputs(outputs, times)
-        end_state = self._check_state(end_state, state.size, "advance() returned end state")
+        try:
+            end_state = self._check_state(end_state, state.size, "advance() returned end state")
+        except CosimError as exc:  # the model broke its contract: not the caller's fault
+            raise CosimError("internal" if "shape" in exc.message else "model_error", exc.message) from None
         self.trial = _Trial(self.epoch, float(times[-1]), end_state)
         return {"t": times, "outputs": checked, "end_time": float(times[-1])}
 
@@ -146,7 +149,7 @@ class Runtime:
         self._require_configured()
         trial = self.trial
         if trial is None:
-            raise CosimError("no_trial", "commit without a run_interval since the last commit, rollback or set_state")
+            raise CosimError("no_trial", "commit without a run_interval since the last commit or rollback")
         if trial.epoch != self.epoch:
             raise CosimError("stale_trial", "the latest trial started from a committed state that has since changed")
         self.history.append((self.time, self.state))
@@ -229,7 +232,7 @@ class Runtime:
             want = f"({size},)" if size is not None else "1-D"
             raise CosimError("bad_value", f"{what} must have shape {want}, got {s.shape}")
         if not np.all(np.isfinite(s)):
-            raise CosimError("model_error" if "returned" in what else "bad_value", f"{what} contains NaN or inf")
+            raise CosimError("bad_value", f"{what} contains NaN or inf")
         return _readonly(s)
 
     def _input_function(

@@ -6,11 +6,13 @@ Gauss-Legendre with ceil(n/2)+1 nodes per step integrates them exactly (degree 2
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 
 import numpy as np
 
 
+@functools.lru_cache(maxsize=64)
 def gauss_nodes(n_samples: int) -> tuple[np.ndarray, np.ndarray]:
     """Gauss-Legendre nodes and weights on [0, 1], exact for degree <= n_samples."""
     p = n_samples // 2 + 2

@@ -29,6 +29,8 @@ class Integrator(Subsim):
 
     def initial_state(self, params: Mapping[str, Any]) -> np.ndarray:
         size = int(params.get("size", 1))
+        if not 1 <= size <= 100_000:
+            raise ValueError(f"size must be between 1 and 100000, got {size}")
         self.inputs = {"u": Port(size, "", "rate of y")}
         self.outputs = {"y": Port(size)}
         self.compute_delay = float(params.get("compute_delay", 0.0))
