@@ -16,7 +16,7 @@ import numpy as np
 
 from cosim.protocol.errors import CosimError
 from cosim.protocol.messages import PROTOCOL_VERSION
-from cosim.signals import SCHEMES, Segment, SegmentError, check_time_grid
+from cosim.signals import SCHEMES, SegmentError, check_time_grid, interpolant
 from cosim.subsim import ModelError, Port, Subsim, as_ports
 
 DEFAULT_HISTORY = 32
@@ -263,7 +263,7 @@ class Runtime:
             columns.append(v)
             slices[name] = slice(start, start + port.size)
             start += port.size
-        at = Segment(times, np.hstack(columns)).interpolant(interp)
+        at = interpolant(times, np.hstack(columns), interp)  # times and values checked above
         items = tuple(slices.items())
         return lambda t: (lambda x: {k: x[s] for k, s in items})(at(t))
 

@@ -87,14 +87,19 @@ class Segment:
 
     def interpolant(self, scheme: str = "linear") -> Interpolant:
         """A function t -> values at t, shape (m,)."""
-        try:
-            build = _BUILDERS[scheme]
-        except KeyError:
-            raise SegmentError(f"unknown interpolation scheme {scheme!r}; known: {', '.join(SCHEMES)}") from None
-        return build(self.times, self.values)
+        return interpolant(self.times, self.values, scheme)
 
     def __call__(self, t: float, scheme: str = "linear") -> np.ndarray:
         return self.interpolant(scheme)(t)
+
+
+def interpolant(times: np.ndarray, values: np.ndarray, scheme: str = "linear") -> Interpolant:
+    """Interpolant of samples already checked as a :class:`Segment` checks them (hot path: no re-check)."""
+    try:
+        build = _BUILDERS[scheme]
+    except KeyError:
+        raise SegmentError(f"unknown interpolation scheme {scheme!r}; known: {', '.join(SCHEMES)}") from None
+    return build(times, values)
 
 
 def _linear(times: np.ndarray, values: np.ndarray) -> Interpolant:
