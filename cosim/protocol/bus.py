@@ -63,7 +63,10 @@ def make_config(
     return conf
 
 
-def client_config(endpoint: str, connect_timeout_s: float, lease_ms: int = 3000) -> zenoh.Config:
+def client_config(endpoint: str, connect_timeout_s: float, lease_ms: int = 10000) -> zenoh.Config:
+    """A subsim's session. ``lease_ms`` only bounds how long a *hung* process goes unnoticed (a killed one
+    is seen at once: its socket closes); 3 s proved too short on a loaded 2-core machine, where a busy
+    router missed keepalives and dropped healthy subsims."""
     return make_config(
         "client",
         connect=[endpoint],
