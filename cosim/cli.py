@@ -133,6 +133,8 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("results", nargs="+", type=Path, help="result files (.csv/.npz)")
     pl.add_argument("--out", type=Path, default=Path("plots"), help="directory for the PNGs")
     pl.add_argument("--signals", nargs="*", help="columns or signal prefixes to plot (default: all)")
+    pl.add_argument("--window", nargs=2, type=float, metavar=("T0", "T1"),
+                    help="plot only this time span (the paper's figs. 8-16: --window 40000 60000)")
     pl.set_defaults(fn=_plot)
     return p
 

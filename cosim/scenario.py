@@ -205,7 +205,13 @@ def parse(raw: Mapping[str, Any], path: Path) -> Scenario:
     if signals is not None and (not isinstance(signals, list) or not all(isinstance(s, str) for s in signals)):
         raise fail("output.signals", "must be a list of 'subsim.port' strings")
 
-    unified = raw.get("unified", {}).get("function") if isinstance(raw.get("unified"), dict) else None
+    unified_table = raw.get("unified", {})
+    if not isinstance(unified_table, dict):
+        raise fail("unified", "must be a table")
+    unknown(unified_table, {"function", "params"}, "unified")
+    unified = unified_table.get("function")
+    if unified is not None and (not isinstance(unified, str) or ":" not in unified):
+        raise fail("unified.function", f"must be 'package.module:function', got {unified!r}")
     return Scenario(path, str(raw.get("name", path.stem)), str(raw.get("description", "")), start, stop, subsims,
                     couplings, settings, default_method, out_path, signals, unified, dict(raw))
 

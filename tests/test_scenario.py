@@ -63,6 +63,7 @@ def test_good_scenario_loads_with_per_method_settings(tmp_path: Path) -> None:
          "subsims.a.model", "not found"),
         ('transform = "gain"', 'transform = "warp"', "couplings[0]", "unknown transform 'warp'"),
         ("stop = 1.0", "stop = -1.0", "stop", "after start"),
+        ("stop = 1.0", 'stop = 1.0\n[unified]\nfuncton = "m:f"', "unified", "unknown key(s) ['funct"),
         ('[subsims.b]\nmodel = "subsims.integrator.subsim:Integrator"', "[subsims.b]", "subsims.b", "needs model"),
     ],
 )
