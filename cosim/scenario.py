@@ -7,7 +7,6 @@ Signals and sizes are checked against the subsims' own port declarations when th
 
 from __future__ import annotations
 
-import importlib
 import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
@@ -17,6 +16,7 @@ from typing import Any
 from cosim.coupler.convergence import Tolerance
 from cosim.coupler.couplings import Coupling
 from cosim.coupler.relaxation import METHODS, Settings
+from cosim.importing import import_object
 from cosim.protocol.bus import check_name
 from cosim.subsim import Subsim
 
@@ -67,13 +67,7 @@ class Scenario:
 
 
 def load_model(path: str) -> type[Subsim]:
-    module_name, sep, cls_name = path.partition(":")
-    if not sep:
-        raise ValueError(f"model {path!r} must be 'package.module:Class'")
-    try:
-        cls = getattr(importlib.import_module(module_name), cls_name)
-    except (ImportError, AttributeError) as exc:
-        raise ValueError(f"model {path!r} not found ({exc})") from None
+    cls = import_object(path, "model")
     if not (isinstance(cls, type) and issubclass(cls, Subsim)):
         raise ValueError(f"model {path!r} is not a cosim.Subsim subclass")
     return cls

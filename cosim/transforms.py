@@ -7,10 +7,11 @@ samples of one output over the interval. Built-ins are named; anything else is n
 
 from __future__ import annotations
 
-import importlib
 from collections.abc import Callable, Sequence
 
 import numpy as np
+
+from cosim.importing import import_object
 
 Transform = Callable[..., np.ndarray]
 
@@ -48,13 +49,9 @@ def resolve(name: str) -> Transform:
     """A built-in name or ``"module:function"``; raises ValueError naming what was not found."""
     if name in BUILTIN:
         return BUILTIN[name]
-    module_name, sep, attr = name.partition(":")
-    if not sep or not module_name or not attr:
+    if ":" not in name:
         raise ValueError(f"unknown transform {name!r}: use one of {sorted(BUILTIN)} or 'package.module:function'")
-    try:
-        fn = getattr(importlib.import_module(module_name), attr)
-    except (ImportError, AttributeError) as exc:
-        raise ValueError(f"transform {name!r} not found ({exc})") from None
+    fn = import_object(name, "transform")
     if not callable(fn):
         raise ValueError(f"transform {name!r} is not callable")
     return fn

@@ -14,7 +14,6 @@ column. The run covers whole intervals past ``stop``, as the coupler does.
 
 from __future__ import annotations
 
-import importlib
 import math
 import time
 from pathlib import Path
@@ -23,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from cosim.coupler.relaxation import Interval, RunSummary
+from cosim.importing import import_object
 from cosim.runner import RunReport, default_output, open_session, output_signals
 from cosim.scenario import Scenario, ScenarioError
 
@@ -31,13 +31,10 @@ def resolve_function(scenario: Scenario) -> Any:
     name = scenario.unified
     if not name:
         raise ScenarioError(f"{scenario.path}: no [unified] function: this scenario has no unified reference")
-    module_name, sep, attr = str(name).partition(":")
-    if not sep or not module_name or not attr:
-        raise ScenarioError(f"{scenario.path}: [unified.function] {name!r} must be 'package.module:function'")
     try:
-        fn = getattr(importlib.import_module(module_name), attr)
-    except (ImportError, AttributeError) as exc:
-        raise ScenarioError(f"{scenario.path}: [unified.function] {name!r} not found ({exc})") from None
+        fn = import_object(name, "unified function")
+    except ValueError as exc:
+        raise ScenarioError(f"{scenario.path}: [unified.function] {exc}") from None
     if not callable(fn):
         raise ScenarioError(f"{scenario.path}: [unified.function] {name!r} is not callable")
     return fn
