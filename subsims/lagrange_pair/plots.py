@@ -66,6 +66,18 @@ def _plt():
 STYLES = ["-", "--", ":", "-."]
 
 
+def _save(plt, fig, ax, title: str, path: Path) -> Path:
+    """Grid and legend on every panel, a title, and the PNG written to ``path``."""
+    for a in ax.flat:
+        a.grid(True, alpha=0.3)
+        a.legend(fontsize=7)
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
 def _min_span(ax, span: float) -> None:
     """Keep an axis from zooming into round-off: show at least +-span/2 around the data."""
     lo, hi = ax.get_ylim()
@@ -111,15 +123,7 @@ def plot_trajectory(results: Sequence[Result], out: Path) -> Path:
     ax[0, 1].set(xlabel="t [s]", ylabel="altitude [ft]", title="altitude")
     ax[1, 0].set(xlabel="t [s]", ylabel="speed [ft/s]", title="inertial speed")
     ax[1, 1].set(xlabel="t [s]", ylabel="east [ft]", title="east drift")
-    for a in ax.flat:
-        a.grid(True, alpha=0.3)
-        a.legend(fontsize=7)
-    fig.suptitle("SRB + drogue: trajectories (I frame: north, east, down)")
-    fig.tight_layout()
-    path = out / "trajectory.png"
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(plt, fig, ax, "SRB + drogue: trajectories (I frame: north, east, down)", out / "trajectory.png")
 
 
 def plot_attitude(results: Sequence[Result], out: Path) -> Path:
@@ -177,15 +181,8 @@ def plot_joint_force(results: Sequence[Result], out: Path) -> Path:
     ax[0, 1].set(ylabel="[lbf]", title="swivel force, lateral components (C axes)")
     ax[1, 0].set(xlabel="t [s]", ylabel="[ft]", title="joint violation |attach B - attach C|, max per 0.5 s")
     ax[1, 1].set(xlabel="t [s]", ylabel="[ft/s]", title="joint velocity violation |A Omega| (eq. 12), max per 0.5 s")
-    for a in ax.flat:
-        a.grid(True, alpha=0.3)
-        a.legend(fontsize=7)
-    fig.suptitle("SRB + drogue: joint force (Lagrange multiplier) and constraint")
-    fig.tight_layout()
-    path = out / "joint_force.png"
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    title = "SRB + drogue: joint force (Lagrange multiplier) and constraint"
+    return _save(plt, fig, ax, title, out / "joint_force.png")
 
 
 def plot_loads(results: Sequence[Result], out: Path) -> Path | None:
