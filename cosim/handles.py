@@ -130,7 +130,11 @@ class InProcessHandle(SubsimHandle):
             result = self.runtime.handle(cmd, args)
         except CosimError as exc:
             error = SubsimError(exc.code, exc.message, self.name, cmd)
-            return lambda: (_ for _ in ()).throw(error)
+
+            def fail() -> dict:  # raised when the caller collects, as a remote error would be
+                raise error
+
+            return fail
         return lambda: result
 
 
