@@ -7,7 +7,6 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from cosim.coupler.couplings import SignalRef, feedback_weight
 from cosim.coupler.relaxation import METHODS, Coordinator, NotConverged
 from cosim.protocol.errors import SubsimError
 from cosim.runner import open_session, run_scenario
@@ -51,6 +50,10 @@ def _run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _ports(ports: dict) -> str:
+    return ", ".join(f"{p}({port.size}{' ' + port.unit if port.unit else ''})" for p, port in ports.items())
+
+
 def _describe(args: argparse.Namespace) -> int:
     scenario = load(args.scenario)
     print(f"{scenario.name}: {scenario.description}".rstrip(": "))
@@ -59,9 +62,7 @@ def _describe(args: argparse.Namespace) -> int:
     try:
         print("subsims:")
         for name, d in session.descriptions.items():
-            ins = ", ".join(f"{p}({port.size}{' ' + port.unit if port.unit else ''})" for p, port in d.inputs.items())
-            outs = ", ".join(f"{p}({port.size}{' ' + port.unit if port.unit else ''})"
-                             for p, port in d.outputs.items())
+            ins, outs = _ports(d.inputs), _ports(d.outputs)
             kind = "external" if scenario.subsims[name].external else scenario.subsims[name].model
             print(f"  {name} [{kind}]{' algebraic' if d.algebraic else ''}\n    in:  {ins or '-'}\n    out: {outs}")
         print("couplings:")
@@ -74,16 +75,14 @@ def _describe(args: argparse.Namespace) -> int:
             print(f"uncoupled inputs (held at zero): {', '.join(loose)}")
         for method in METHODS:
             st = scenario.settings_for(method)
-            co = Coordinator(session.handles, scenario.couplings, st, session.descriptions)
-            sizes = {SignalRef(s, p): port.size for s, d in session.descriptions.items()
-                     for p, port in d.inputs.items()}
             line = f"{method}: H = {st.interval:g}, {st.samples} samples, tol {st.tol.rel:g}/{st.tol.abs:g}, " \
                    f"first guess {st.first_guess}, interp {st.interp}"
             print(line)
             if method == "distributed":
+                co = Coordinator(session.handles, scenario.couplings, st, session.descriptions)
                 given = "given" if st.order is not None else "derived"
                 print(f"  order ({given}): {' -> '.join(co.order)}")
-                print(f"  feedback edges ({feedback_weight(co.order, scenario.couplings, sizes)} scalar signals): "
+                print(f"  feedback edges ({co.feedback_signals} scalar signals): "
                       f"{'; '.join(map(str, co.feedback)) or 'none'}")
     finally:
         session.close()

@@ -89,9 +89,9 @@ def open_session(
                 session.descriptions[name] = handles[name].configure(spec.params, t0=scenario.start)
             except SubsimError as exc:
                 raise ScenarioError(f"{scenario.path}: [subsims.{name}.params] {exc.message}") from None
-        for i in range(len(scenario.couplings)):
-            inputs = {n: d.inputs for n, d in session.descriptions.items()}
-            outputs = {n: d.outputs for n, d in session.descriptions.items()}
+        inputs = {n: d.inputs for n, d in session.descriptions.items()}
+        outputs = {n: d.outputs for n, d in session.descriptions.items()}
+        for i in range(len(scenario.couplings)):  # one at a time, so the error names the first bad key
             try:
                 check_couplings(scenario.couplings[: i + 1], inputs, outputs)
             except ValueError as exc:
