@@ -162,10 +162,14 @@ class RemoteHandle(SubsimHandle):
     def alive(self) -> bool:
         return self._alive.is_set()
 
+    def wait_alive(self, timeout: float) -> bool:
+        """True once the process's liveliness token has been seen (within ``timeout`` seconds)."""
+        return self._alive.wait(timeout)
+
     def wait_ready(self, timeout: float = 10.0) -> None:
         """Wait for the liveliness token and a first answered ``status`` (declarations propagate late)."""
         deadline = time.monotonic() + timeout
-        if not self._alive.wait(timeout):
+        if not self.wait_alive(timeout):
             raise SubsimError("no_responder", f"no process appeared within {timeout:g} s", self.name, "connect")
         while True:
             replies = list(self.session.get(self._key, payload=encode_request("status"), timeout=1.0))

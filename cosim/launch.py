@@ -8,12 +8,14 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+import time
 from dataclasses import dataclass, field
 
 import zenoh
 
 from cosim.handles import RemoteHandle
 from cosim.protocol.bus import coordinator_alive_key, new_run_id, open_router
+from cosim.protocol.errors import SubsimError
 
 
 def subsim_command(
@@ -36,9 +38,8 @@ class SubsimProcess:
         """Ask for ``shutdown``, then SIGTERM, then SIGKILL; always reaps the process."""
         if self.popen.poll() is None and self.handle.alive:
             try:
-                self.handle.timeout, timeout = min(self.handle.timeout, grace), self.handle.timeout
+                self.handle.timeout = min(self.handle.timeout, grace)  # the handle is closed below anyway
                 self.handle.shutdown()
-                self.handle.timeout = timeout
             except Exception:
                 pass
         try:
@@ -123,15 +124,11 @@ class Bus:
 
 
 def _wait_ready_or_exit(handle: RemoteHandle, popen: subprocess.Popen, wait: float) -> None:
-    import time
-
-    from cosim.protocol.errors import SubsimError
-
     deadline = time.monotonic() + wait
     while time.monotonic() < deadline:
         if popen.poll() is not None:
             raise SubsimError("no_responder", f"process exited with code {popen.returncode}", handle.name, "spawn")
-        if handle._alive.wait(0.05):
+        if handle.wait_alive(0.05):
             handle.wait_ready(max(deadline - time.monotonic(), 0.1))
             return
     raise SubsimError("no_responder", f"did not come up within {wait:g} s", handle.name, "spawn")
