@@ -80,15 +80,19 @@ class SubsimHandle:
         return Description.from_result(self._call("configure", params=dict(params), t0=float(t0)))
 
     def start_run_interval(
-        self, times: np.ndarray, inputs: Mapping[str, np.ndarray], interp: str = "linear"
+        self, times: np.ndarray, inputs: Mapping[str, np.ndarray], interp: str = "linear", commit: bool = False
     ) -> Pending:
-        wait = self._begin("run_interval", {"t": np.asarray(times), "inputs": dict(inputs), "interp": interp})
+        """Send ``run_interval`` now, wait later. ``commit``: commit the latest trial first, in the same request."""
+        args = {"t": np.asarray(times), "inputs": dict(inputs), "interp": interp}
+        if commit:
+            args["commit"] = True
+        wait = self._begin("run_interval", args)
         return lambda: (lambda r: IntervalResult(r["t"], r["outputs"], r["end_time"]))(wait())
 
     def run_interval(
-        self, times: np.ndarray, inputs: Mapping[str, np.ndarray], interp: str = "linear"
+        self, times: np.ndarray, inputs: Mapping[str, np.ndarray], interp: str = "linear", commit: bool = False
     ) -> IntervalResult:
-        return self.start_run_interval(times, inputs, interp)()
+        return self.start_run_interval(times, inputs, interp, commit)()
 
     def start_commit(self) -> Callable[[], float]:
         """Send ``commit`` now, wait later: a coordinator commits all subsims in one round trip."""

@@ -117,8 +117,15 @@ class Runtime:
         self.history.clear()
         return self.describe()
 
-    def run_interval(self, t: Any, inputs: Mapping[str, Any], interp: str = "linear") -> dict:
+    def run_interval(self, t: Any, inputs: Mapping[str, Any], interp: str = "linear", commit: bool = False) -> dict:
+        """Run the interval ``t`` from the committed state. With ``commit`` the latest trial is committed
+        first, in the same request (one round trip less per interval); it is committed only if this run
+        succeeds, so a failed request still changes nothing committed."""
         state, t0 = self._require_configured()
+        trial = None
+        if commit:
+            trial = self._committable_trial()
+            state, t0 = trial.end_state, trial.end_time
         try:
             times = check_time_grid(t, "t")
         except SegmentError as exc:
@@ -126,8 +133,8 @@ class Runtime:
         if times.size < 2:
             raise CosimError("bad_value", f"t must hold at least 2 sample times, got {times.size}")
         if times[0] != t0:
-            start = float(times[0])
-            raise CosimError("time_mismatch", f"interval starts at t={start!r} but the committed time is {t0!r}")
+            start, what = float(times[0]), "the trial to commit ends" if commit else "the committed time is"
+            raise CosimError("time_mismatch", f"interval starts at t={start!r} but {what} {t0!r}")
         if interp not in SCHEMES:
             raise CosimError("bad_value", f"interp: unknown scheme {interp!r}; known: {', '.join(SCHEMES)}")
         u = self._input_function(times, inputs, interp)
@@ -142,20 +149,28 @@ class Runtime:
             end_state = self._check_state(end_state, state.size, "advance() returned end state")
         except CosimError as exc:  # the model broke its contract: not the caller's fault
             raise CosimError("internal" if "shape" in exc.message else "model_error", exc.message) from None
+        if trial is not None:
+            self._commit(trial)
         self.trial = _Trial(self.epoch, float(times[-1]), end_state)
         return {"t": times, "outputs": checked, "end_time": float(times[-1])}
 
     def commit(self) -> dict:
         self._require_configured()
+        self._commit(self._committable_trial())
+        return {"time": self.time}
+
+    def _committable_trial(self) -> _Trial:
         trial = self.trial
         if trial is None:
             raise CosimError("no_trial", "commit without a run_interval since the last commit or rollback")
         if trial.epoch != self.epoch:
             raise CosimError("stale_trial", "the latest trial started from a committed state that has since changed")
+        return trial
+
+    def _commit(self, trial: _Trial) -> None:
         self.history.append((self.time, self.state))
         self._set_committed(trial.end_time, trial.end_state)
         self.trial = None
-        return {"time": self.time}
 
     def rollback(self, to_time: float | None = None) -> dict:
         self._require_configured()

@@ -63,6 +63,39 @@ def test_commit_promotes_latest_trial(handle: SubsimHandle) -> None:
     assert err.value.code == "no_trial" and err.value.subsim == "integ" and err.value.command == "commit"
 
 
+def test_run_interval_with_commit_equals_commit_then_run_interval(handle: SubsimHandle) -> None:
+    first = handle.run_interval(TIMES, ramp(TIMES))
+    nxt = TIMES + 0.4
+    with pytest.raises(SubsimError) as err:  # the grid must start where the trial to commit ends
+        handle.run_interval(TIMES, ramp(TIMES), commit=True)
+    assert err.value.code == "time_mismatch" and "trial to commit ends" in err.value.message
+    assert committed(handle)[0] == 0.0
+    second = handle.run_interval(nxt, ramp(nxt), commit=True)
+    state = handle.get_state()
+    assert state.time == 0.4 and state.state.tobytes() == first.outputs["y"][-1].tobytes()
+    assert handle.commit() == 0.8  # the new trial is the one left to commit
+    assert handle.get_state().state.tobytes() == second.outputs["y"][-1].tobytes()
+    # the same two intervals with separate commits give the same bytes
+    handle.rollback(to_time=0.0)
+    handle.run_interval(TIMES, ramp(TIMES))
+    handle.commit()
+    assert handle.run_interval(nxt, ramp(nxt)).outputs["y"].tobytes() == second.outputs["y"].tobytes()
+
+
+def test_run_interval_with_commit_and_no_trial_or_a_failed_run_commits_nothing(handle: SubsimHandle) -> None:
+    with pytest.raises(SubsimError) as err:
+        handle.run_interval(TIMES, ramp(TIMES), commit=True)
+    assert err.value.code == "no_trial" and err.value.command == "run_interval"
+    trial = handle.run_interval(TIMES, ramp(TIMES))
+    nxt = TIMES + 0.4
+    with pytest.raises(SubsimError) as err:
+        handle.run_interval(nxt, {"u": np.full((N, 2), np.nan)}, commit=True)
+    assert err.value.code == "bad_value"
+    assert committed(handle) == (0.0, np.array([1.0, -2.0]).tobytes())
+    assert handle.commit() == 0.4  # the trial survived the failed request
+    assert handle.get_state().state.tobytes() == trial.outputs["y"][-1].tobytes()
+
+
 def test_commit_of_a_trial_made_stale_by_set_state_is_refused(handle: SubsimHandle) -> None:
     snapshot = handle.get_state()
     handle.run_interval(TIMES, ramp(TIMES))

@@ -122,3 +122,31 @@ def test_taylor_stages_over_zenoh_equal_in_process_bit_for_bit(spawn_subsim, met
         np.testing.assert_allclose(runs[1][n][:, 0], taylor, rtol=1e-12)
     assert len(runs[0]) == len(runs[1])
     assert all(a.tobytes() == b.tobytes() for a, b in zip(runs[0], runs[1]))
+
+
+@pytest.mark.parametrize("method", ["centralized", "distributed"])
+def test_run_sends_each_commit_with_the_next_interval_and_commits_all_at_the_end(method: str) -> None:
+    """One request per subsim per stage, plus one final commit: no commit round trip per interval."""
+    a, b = InProcessHandle(Integrator(), "a"), InProcessHandle(Integrator(), "b")
+    for h in (a, b):
+        h.configure({"y0": [1.0]})
+    couplings = [Coupling.make("a.u", "b.y", "gain", {"k": -1.0}), Coupling.make("b.u", "a.y")]
+    c = Coordinator({"a": a, "b": b}, couplings, Settings(method=method, interval=0.1, samples=3))
+    stages: list[int] = []
+    summary = c.run(0.0, 1.0, on_interval=lambda iv: stages.append(iv.stages))
+    assert summary.intervals == 10 and summary.t_end == pytest.approx(1.0)
+    for h in (a, b):
+        status = h.status()
+        assert status["time"] == summary.t_end and not status["has_trial"]
+        # configure, describe, one run per stage, the final commit, and this status
+        assert status["requests"] == 2 + sum(stages) + 1 + 1
+    # the same run with a commit after every interval (advance) ends in the same committed state
+    a2, b2 = InProcessHandle(Integrator(), "a"), InProcessHandle(Integrator(), "b")
+    for h in (a2, b2):
+        h.configure({"y0": [1.0]})
+    c2 = Coordinator({"a": a2, "b": b2}, couplings, Settings(method=method, interval=0.1, samples=3))
+    t = 0.0
+    for k in range(10):
+        t = float(c2.advance(t, (k + 1) * 0.1).t[-1])
+    assert a2.get_state().state.tobytes() == a.get_state().state.tobytes()
+    assert b2.get_state().state.tobytes() == b.get_state().state.tobytes()

@@ -21,7 +21,7 @@ import numpy as np
 from cosim.coupler.convergence import Check, Tolerance, check
 from cosim.coupler.couplings import Coupling, SignalRef, check_couplings, derive_order, feedback_weight, is_feedback
 from cosim.coupler.first_guess import POLICIES, first_guess
-from cosim.handles import Description, SubsimHandle
+from cosim.handles import Description, IntervalResult, SubsimHandle
 from cosim.signals import SCHEMES
 
 METHODS = ("centralized", "distributed")
@@ -134,6 +134,8 @@ class Coordinator:
         self.forward = [c for c in self.couplings if not is_feedback(c, rank)]
         self.feedback_signals = feedback_weight(self.order, self.couplings, self.sizes)
         self._previous: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        # converged subsims whose commit has not been sent: it rides on their next run_interval
+        self._uncommitted: set[str] = set()
 
     # --- a run --------------------------------------------------------------------------------
 
@@ -151,11 +153,12 @@ class Coordinator:
         while t < t_stop - 1e-9 * H:
             k = round((t - t_start) / H)
             t1 = t_start + (k + 1) * H if t_start + k * H == t else t + H
-            interval = self.advance(t, t1)
+            interval = self._advance(t, t1)
             summary.add(interval)
             if on_interval is not None:
                 on_interval(interval)
             t = float(interval.t[-1])
+        self.commit_pending()
         return summary
 
     # --- one interval -------------------------------------------------------------------------
@@ -172,6 +175,19 @@ class Coordinator:
         With ``max_halvings`` > 0 a non-converging interval is retried on its first half, then
         its first quarter, ...; the returned interval then ends before ``t1``.
         """
+        interval = self._advance(t0, t1)
+        self.commit_pending()
+        return interval
+
+    def commit_pending(self) -> None:
+        """Commit, in one concurrent round trip, the converged trials still waiting for a next interval."""
+        names = [n for n in self.handles if n in self._uncommitted]
+        for wait in [self.handles[n].start_commit() for n in names]:
+            wait()
+        self._uncommitted.clear()
+
+    def _advance(self, t0: float, t1: float) -> Interval:
+        """:meth:`advance`, but each subsim's commit rides on its first request of the next interval."""
         started = time.perf_counter()
         for halvings in range(self.settings.max_halvings + 1):
             times = self.sample_times(t0, t0 + (t1 - t0) / 2**halvings)
@@ -183,8 +199,7 @@ class Coordinator:
                     h.rollback()
                 if halvings == self.settings.max_halvings:
                     raise
-        for wait in [h.start_commit() for h in self.handles.values()]:
-            wait()
+        self._uncommitted = set(self.handles)
         self._previous = {k: (interval.t, v) for k, v in interval.inputs.items()}
         interval.wall_time, interval.halvings = time.perf_counter() - started, halvings
         return interval
@@ -193,6 +208,21 @@ class Coordinator:
         if self.settings.method == "centralized":
             return self._centralized(times)
         return self._distributed(times)
+
+    def _collect(self, pending: Mapping[str, Callable[[], IntervalResult]]) -> dict[str, dict[str, np.ndarray]]:
+        """Wait for every pending run (none is left in flight); a subsim that answered has committed
+        its previous interval if asked to. Raises the first error after all have answered."""
+        outputs, error = {}, None
+        for name, wait in pending.items():
+            try:
+                outputs[name] = wait().outputs
+            except Exception as exc:
+                error = error or exc
+                continue
+            self._uncommitted.discard(name)
+        if error is not None:
+            raise error
+        return outputs
 
     def _guess(self, times: np.ndarray, couplings: Sequence[Coupling]) -> dict[str, np.ndarray]:
         sizes = {str(c.target): self.sizes[c.target] for c in couplings}
@@ -219,10 +249,11 @@ class Coordinator:
         previous: dict[str, np.ndarray] | None = None
         for stage in range(s.max_stages):
             pending = {
-                name: h.start_run_interval(times, self._subsim_inputs(name, inputs, n), s.interp)
+                name: h.start_run_interval(times, self._subsim_inputs(name, inputs, n), s.interp,
+                                           commit=name in self._uncommitted)
                 for name, h in self.handles.items()
             }
-            outputs = {name: wait().outputs for name, wait in pending.items()}
+            outputs = self._collect(pending)
             if self.on_stage is not None:
                 self.on_stage(stage, outputs)
             flat = {f"{name}.{p}": v for name, ports in outputs.items() for p, v in ports.items()}
@@ -245,8 +276,8 @@ class Coordinator:
                 for c in self.forward:
                     if c.target.subsim == name:
                         inputs[str(c.target)] = self._evaluate(c, outputs, n)
-                h = self.handles[name]
-                outputs[name] = h.run_interval(times, self._subsim_inputs(name, inputs, n), s.interp).outputs
+                outputs.update(self._collect({name: self.handles[name].start_run_interval(
+                    times, self._subsim_inputs(name, inputs, n), s.interp, commit=name in self._uncommitted)}))
             if self.on_stage is not None:
                 self.on_stage(stage, outputs)
             new = {str(c.target): self._evaluate(c, outputs, n) for c in self.feedback}

@@ -51,7 +51,9 @@ DESCRIPTION_FIELDS: Fields = {
 REQUESTS: dict[str, Fields] = {
     "describe": {},
     "configure": {"params": (t_params, True), "t0": (t_float, False)},
-    "run_interval": {"t": (t_array, True), "inputs": (t_array_map, True), "interp": (t_str, False)},
+    "run_interval": {
+        "t": (t_array, True), "inputs": (t_array_map, True), "interp": (t_str, False), "commit": (t_bool, False),
+    },
     "commit": {},
     "rollback": {"to_time": (t_float, False)},
     "get_state": {},
