@@ -246,7 +246,7 @@ class Runtime:
         if s.ndim != 1 or (size is not None and s.size != size):
             want = f"({size},)" if size is not None else "1-D"
             raise CosimError("bad_value", f"{what} must have shape {want}, got {s.shape}")
-        if not np.all(np.isfinite(s)):
+        if not np.isfinite(s).all():
             raise CosimError("bad_value", f"{what} contains NaN or inf")
         return _readonly(s)
 
@@ -273,7 +273,7 @@ class Runtime:
                 raise CosimError(
                     "bad_value", f"inputs.{name}: expected shape ({times.size}, {port.size}), got {v.shape}"
                 )
-            if not np.all(np.isfinite(v)):
+            if not np.isfinite(v).all():
                 raise CosimError("bad_value", f"inputs.{name}: contains NaN or inf")
             columns.append(v)
             slices[name] = slice(start, start + port.size)
@@ -296,7 +296,7 @@ class Runtime:
                 raise CosimError(
                     "internal", f"advance() output {name!r} has shape {v.shape}, expected ({times.size}, {port.size})"
                 )
-            if not np.all(np.isfinite(v)):
+            if not np.isfinite(v).all():
                 i = int(np.argwhere(~np.isfinite(v))[0][0])
                 raise CosimError("model_error", f"output {name!r} is not finite at t={times[i]!r}")
             checked[name] = v

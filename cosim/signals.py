@@ -29,10 +29,10 @@ def check_time_grid(times: np.ndarray, what: str = "times") -> np.ndarray:
     t = np.asarray(times, dtype=np.float64)
     if t.ndim != 1 or t.size == 0:
         raise SegmentError(f"{what} must be a non-empty 1-D array, got shape {t.shape}")
-    if not np.all(np.isfinite(t)):
+    if not np.isfinite(t).all():
         raise SegmentError(f"{what} contains NaN or inf at index {int(np.argmin(np.isfinite(t)))}")
     steps = np.diff(t)
-    if np.any(steps <= 0):
+    if (steps <= 0).any():
         i = int(np.argmax(steps <= 0))
         raise SegmentError(
             f"{what} must be strictly increasing: t[{i}]={float(t[i])!r} >= t[{i + 1}]={float(t[i + 1])!r}"
@@ -62,7 +62,7 @@ class Segment:
             v = v.reshape(-1, 1)
         if v.ndim != 2 or v.shape[0] != t.size:
             raise SegmentError(f"values must have shape ({t.size}, m) to match {t.size} times, got {v.shape}")
-        if not np.all(np.isfinite(v)):
+        if not np.isfinite(v).all():
             i, j = np.argwhere(~np.isfinite(v))[0]
             raise SegmentError(f"values[{i}, {j}] is {float(v[i, j])!r}: samples must be finite")
         m = v.shape[1]

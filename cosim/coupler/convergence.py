@@ -49,8 +49,8 @@ class Check:
 
 def convrg(new: np.ndarray, old: np.ndarray, tol: Tolerance) -> tuple[np.ndarray, np.ndarray]:
     """Per channel of (n, m) samples: (max |new - old|, converged?)."""
-    check1 = np.max(np.abs(new - old), axis=0)
-    span = np.abs(np.max(new, axis=0) - np.min(new, axis=0))
+    check1 = np.abs(new - old).max(axis=0)
+    span = np.abs(new.max(axis=0) - new.min(axis=0))
     return check1, (check1 <= tol.rel * span) | (check1 <= tol.abs)
 
 

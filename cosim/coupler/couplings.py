@@ -57,13 +57,15 @@ class Coupling:
         """The target's samples (n, size) from the sources' samples in ``outputs``."""
         args = [outputs[s.subsim][s.port] for s in self.sources]
         try:
-            value = np.asarray(self.transform(*args, **self.params), dtype=np.float64)
+            value = self.transform(*args, **self.params)
+            if type(value) is not np.ndarray or value.dtype != np.float64:
+                value = np.asarray(value, dtype=np.float64)
         except Exception as exc:
             raise ValueError(f"coupling {self}: transform {self.transform_name!r} failed: {exc}") from exc
         if value.shape != (n, size):
             name = self.transform_name
             raise ValueError(f"coupling {self}: transform {name!r} gave shape {value.shape}, need ({n}, {size})")
-        if not np.all(np.isfinite(value)):
+        if not np.isfinite(value).all():
             raise ValueError(f"coupling {self}: transform {self.transform_name!r} produced NaN or inf")
         return value
 

@@ -230,7 +230,8 @@ class Coordinator:
 
     def _subsim_inputs(self, name: str, signals: Mapping[str, np.ndarray], n: int) -> dict[str, np.ndarray]:
         """Inputs of ``name`` from coupled ``signals``; uncoupled inputs are zero."""
-        return {p: signals.get(f"{name}.{p}", np.zeros((n, port.size))) for p, port in self.inputs[name].items()}
+        return {p: signals[k] if (k := f"{name}.{p}") in signals else np.zeros((n, port.size))
+                for p, port in self.inputs[name].items()}
 
     def _evaluate(self, c: Coupling, outputs: Mapping, n: int) -> np.ndarray:
         return c.evaluate(outputs, self.sizes[c.target], n)

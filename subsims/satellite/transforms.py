@@ -32,16 +32,28 @@ def _pair(a: np.ndarray, b: np.ndarray, what_a: str, what_b: str) -> tuple[np.nd
     return a, b
 
 
+_last_dcm: tuple[bytes, np.ndarray] = (b"", np.empty((0, 3, 3)))
+
+
+def _dcm(phi: np.ndarray) -> np.ndarray:
+    """dcm321_batch(phi), remembered for the last phi: a stage rotates three signals by the same angles."""
+    global _last_dcm
+    key = phi.tobytes()
+    if key != _last_dcm[0]:
+        _last_dcm = (key, dcm321_batch(phi))
+    return _last_dcm[1]
+
+
 def body_to_inertial(vec_b: np.ndarray, phi: np.ndarray) -> np.ndarray:
     """A(phi)^T v_b: e.g. aero force body -> inertial for the orbit (coupler / coupler3: tran3 + matvec)."""
     v, p = _pair(vec_b, phi, "vec_b", "phi")
-    return np.einsum("nji,nj->ni", dcm321_batch(p), v)
+    return np.einsum("nji,nj->ni", _dcm(p), v)
 
 
 def inertial_to_body(vec_i: np.ndarray, phi: np.ndarray) -> np.ndarray:
     """A(phi) v_i: orbit radius / velocity inertial -> body for the aerodynamics (coupler / coupler2)."""
     v, p = _pair(vec_i, phi, "vec_i", "phi")
-    return np.einsum("nij,nj->ni", dcm321_batch(p), v)
+    return np.einsum("nij,nj->ni", _dcm(p), v)
 
 
 def torque_to_cm(torque: np.ndarray, force: np.ndarray, r_cm: Sequence[float] = R_CM,
@@ -56,7 +68,8 @@ def torque_to_cm(torque: np.ndarray, force: np.ndarray, r_cm: Sequence[float] = 
     r = np.asarray(r_cm, dtype=np.float64)
     if r.shape != (3,):
         raise ValueError(f"parameter 'r_cm' must be 3 numbers, got {r_cm!r}")
-    rxf = np.cross(np.broadcast_to(r, f.shape), f)
+    rxf = np.column_stack([r[1] * f[:, 2] - r[2] * f[:, 1], r[2] * f[:, 0] - r[0] * f[:, 2],
+                           r[0] * f[:, 1] - r[1] * f[:, 0]])
     return t - rxf if physical else t + rxf
 
 
