@@ -17,7 +17,11 @@ case has). Prints, per case:
   stages-2 for RF-C, see tests/satellite/test_paper_claims.py);
 * the largest deviation from the unified reference in each 1,000 s window: Euler angles (deg, the
   range-limited output angles as plotted in the paper, differences wrapped to +-180) and position (m);
-* the time at which the deviation first exceeds 1 deg (the paper: case 3 at about 45,000 s).
+* the time at which the deviation first exceeds 1 deg (the paper: case 3 at about 45,000 s);
+* the transport floor of each Zenoh run: the round trips one interval waits for in sequence (RF-D: every
+  subsim of every stage; RF-C: one per stage, the subsims of a stage answering concurrently) times the
+  median ``status`` round trip to a subsim process measured in the same benchmark, as a multiple of
+  RK-U's wall time per interval. It bounds the speed ratio from below, whatever the subsims compute.
 """
 
 from __future__ import annotations
@@ -36,6 +40,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from cosim.launch import Bus  # noqa: E402
 from cosim.results import read_results  # noqa: E402
 from cosim.runner import run_scenario  # noqa: E402
 from cosim.scenario import load  # noqa: E402
@@ -64,6 +69,27 @@ def run_one(case: int, method: str, stop: float, out: Path, inprocess: bool) -> 
     return {"wall_s": wall, "cpu_s": cpu, "stop": stop, "t_end": report.summary.t_end,
             "intervals": report.summary.intervals, "stages": dict(report.summary.stages),
             "transport": "in-process" if inprocess or method == "unified" else "zenoh"}
+
+
+def status_round_trip(calls: int = 500) -> float:
+    """Median round trip (s) of ``status`` to an aero subsim process on this machine: no model work."""
+    with Bus.open() as bus:
+        handle = bus.spawn("subsims.aero", name="aero", quiet=True).handle
+        for _ in range(50):
+            handle.status()
+        times = []
+        for _ in range(calls):
+            start = time.perf_counter()
+            handle.status()
+            times.append(time.perf_counter() - start)
+    return float(np.median(times))
+
+
+def sequential_round_trips(method: str, hist: Counter, subsims: int = 3) -> float:
+    """Round trips an interval waits for one after the other, on average (commits ride on runs)."""
+    intervals = sum(hist.values())
+    stages = sum(k * v for k, v in hist.items()) / intervals
+    return stages * (subsims if method == "distributed" else 1)
 
 
 def stages_histogram(diag: Path) -> Counter:
@@ -129,11 +155,19 @@ def report_case(case: int, out: Path, timings: dict, window: float, level: float
             line += "  stages/interval: " + ", ".join(f"{k}: {v}" for k, v in sorted(hist.items()))
         print(line)
     u = timings.get(f"case{case}-unified")
+    rtt = timings.get("status_round_trip_s")
     for method in ("distributed", "centralized"):
         tm = timings.get(f"case{case}-{method}")
         if u and tm and tm["stop"] == u["stop"]:
-            print(f"  speed {SHORT[method]}/RK-U: wall {tm['wall_s'] / u['wall_s']:.1f}x, "
-                  f"cpu {tm['cpu_s'] / u['cpu_s']:.1f}x   (paper, CPU: {'4' if method == 'distributed' else '6'}x)")
+            line = (f"  speed {SHORT[method]}/RK-U: wall {tm['wall_s'] / u['wall_s']:.1f}x, "
+                    f"cpu {tm['cpu_s'] / u['cpu_s']:.1f}x   (paper, CPU: {'4' if method == 'distributed' else '6'}x)")
+            diag = out / f"case{case}-{method}.diag.csv"
+            if rtt and tm["transport"] == "zenoh" and diag.exists() and tm["intervals"]:
+                trips = sequential_round_trips(method, stages_histogram(diag))
+                floor = trips * rtt / (u["wall_s"] / tm["intervals"])
+                line += (f"; transport floor {trips:.1f} sequential round trips x {rtt * 1e6:.0f} us "
+                         f"= {floor:.1f}x RK-U")
+            print(line)
 
     runs = load_case(out, case)
     pairs = [(m, "unified") for m in ("distributed", "centralized") if m in runs and "unified" in runs]
@@ -179,6 +213,10 @@ def main(argv: list[str] | None = None) -> int:
     timing_file = args.out / "timings.json"
     timings = json.loads(timing_file.read_text()) if timing_file.exists() else {}
     if not args.analyze_only:
+        if not args.inprocess and set(args.methods) - {"unified"}:
+            timings["status_round_trip_s"] = status_round_trip()
+            print(f"status round trip to a subsim process: {timings['status_round_trip_s'] * 1e6:.0f} us (median)",
+                  file=sys.stderr, flush=True)
         for case in args.cases:
             for method in (m for m in METHODS if m in args.methods):
                 key = f"case{case}-{method}"
