@@ -18,10 +18,12 @@ case has). Prints, per case:
 * the largest deviation from the unified reference in each 1,000 s window: Euler angles (deg, the
   range-limited output angles as plotted in the paper, differences wrapped to +-180) and position (m);
 * the time at which the deviation first exceeds 1 deg (the paper: case 3 at about 45,000 s);
-* the transport floor of each Zenoh run: the round trips one interval waits for in sequence (RF-D: every
-  subsim of every stage; RF-C: one per stage, the subsims of a stage answering concurrently) times the
-  median ``status`` round trip to a subsim process measured in the same benchmark, as a multiple of
-  RK-U's wall time per interval. It bounds the speed ratio from below, whatever the subsims compute.
+* the floors of each coupled run, as multiples of RK-U's wall time per interval: the transport floor (the
+  round trips one interval waits for in sequence -- RF-D: every subsim of every stage; RF-C: one per
+  stage, the subsims of a stage answering concurrently -- times the median ``status`` round trip to a
+  subsim process measured in the same benchmark) and the physics floor (the models' own integration for
+  that many stages, timed here with no framework, transport or output; RF-C counts only the slowest
+  subsim of a stage, as if all ran in parallel). Their sum bounds the speed ratio from below.
 """
 
 from __future__ import annotations
@@ -83,6 +85,35 @@ def status_round_trip(calls: int = 500) -> float:
             handle.status()
             times.append(time.perf_counter() - start)
     return float(np.median(times))
+
+
+def physics_per_stage(case: int, repeats: int = 2000) -> dict[str, float]:
+    """Seconds one stage of each subsim spends in its physics alone (constant inputs, plain calls)."""
+    from subsims.aero.model import AeroParams, aero_loads
+    from subsims.attitude.model import AttitudeParams
+    from subsims.attitude.model import integrate as attitude_integrate
+    from subsims.orbit.model import OrbitParams
+    from subsims.orbit.model import integrate as orbit_integrate
+
+    scenario = load(ROOT / "scenarios" / "satellite" / f"case{case}.toml")
+    params = {name: spec.params for name, spec in scenario.subsims.items()}
+    orbit, attitude = OrbitParams.from_mapping(params["orbit"]), AttitudeParams.from_mapping(params["attitude"])
+    aero = AeroParams.from_mapping(params["aero"])
+    x_orbit, x_attitude = orbit.initial_state().tolist(), attitude.initial_state().tolist()
+    force, radius, torque, velocity = (0.01, 0.02, 0.03), x_orbit[:3], (0.0, 1e-4, 0.0), (10.0, 7600.0, 5.0)
+    times = [0.1 * j for j in range(5)]
+    work = {
+        "orbit": lambda: orbit_integrate(orbit, x_orbit, times, lambda t: force),
+        "attitude": lambda: attitude_integrate(attitude, x_attitude, times, lambda t: (radius, torque)),
+        "aero": lambda: [aero_loads(velocity, aero, aero.facets) for _ in times],
+    }
+    seconds = {}
+    for name, fn in work.items():
+        start = time.perf_counter()
+        for _ in range(repeats):
+            fn()
+        seconds[name] = (time.perf_counter() - start) / repeats
+    return seconds
 
 
 def sequential_round_trips(method: str, hist: Counter, subsims: int = 3) -> float:
@@ -162,11 +193,17 @@ def report_case(case: int, out: Path, timings: dict, window: float, level: float
             line = (f"  speed {SHORT[method]}/RK-U: wall {tm['wall_s'] / u['wall_s']:.1f}x, "
                     f"cpu {tm['cpu_s'] / u['cpu_s']:.1f}x   (paper, CPU: {'4' if method == 'distributed' else '6'}x)")
             diag = out / f"case{case}-{method}.diag.csv"
-            if rtt and tm["transport"] == "zenoh" and diag.exists() and tm["intervals"]:
-                trips = sequential_round_trips(method, stages_histogram(diag))
-                floor = trips * rtt / (u["wall_s"] / tm["intervals"])
-                line += (f"; transport floor {trips:.1f} sequential round trips x {rtt * 1e6:.0f} us "
-                         f"= {floor:.1f}x RK-U")
+            physics = timings.get(f"case{case}-physics_per_stage_s")
+            if rtt and physics and tm["transport"] == "zenoh" and diag.exists() and tm["intervals"]:
+                hist = stages_histogram(diag)
+                stages = sum(k * v for k, v in hist.items()) / sum(hist.values())
+                per_interval = u["wall_s"] / tm["intervals"]
+                trips = sequential_round_trips(method, hist)
+                transport = trips * rtt / per_interval
+                work = stages * (sum(physics.values()) if method == "distributed" else max(physics.values()))
+                line += (f"\n    floors: transport {trips:.1f} sequential round trips x {rtt * 1e6:.0f} us = "
+                         f"{transport:.1f}x, physics {work * 1e6:.0f} us per interval = {work / per_interval:.1f}x, "
+                         f"together {transport + work / per_interval:.1f}x RK-U")
             print(line)
 
     runs = load_case(out, case)
@@ -218,6 +255,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"status round trip to a subsim process: {timings['status_round_trip_s'] * 1e6:.0f} us (median)",
                   file=sys.stderr, flush=True)
         for case in args.cases:
+            timings[f"case{case}-physics_per_stage_s"] = physics_per_stage(case)
             for method in (m for m in METHODS if m in args.methods):
                 key = f"case{case}-{method}"
                 timings.pop(key, None)
