@@ -27,7 +27,6 @@ import numpy as np
 from cosim.results import read_results
 
 SATELLITE = ("attitude.phi", "attitude.omega", "orbit.R")
-REARTH_KM = 6367.65  # the paper's Earth radius (spec §7.1), for the altitude output
 MAX_POINTS = 4000  # envelope buckets per line
 _COLUMN = re.compile(r"^(?P<signal>[^\[]+)\[(?P<index>\d+)\]$")
 
@@ -100,16 +99,6 @@ def envelope(t: np.ndarray, y: np.ndarray, points: int = MAX_POINTS) -> tuple[np
     return tt, yy
 
 
-def _limited_angles_deg(phi: np.ndarray) -> np.ndarray:
-    """The listings' output range limiting (dcm321 then dcm2ang321, spec §4.4/§6.2), rad -> deg."""
-    s1, s2, s3 = np.sin(phi).T
-    c1, c2, c3 = np.cos(phi).T
-    a12, a13, a11 = c2 * s3, -s2, c2 * c3
-    a23, a33 = s1 * c2, c1 * c2
-    return np.degrees(np.column_stack([np.arctan2(a23, a33), np.arctan2(-a13, np.hypot(a11, a12)),
-                                       np.arctan2(a12, a11)]))
-
-
 def break_wraps(t: np.ndarray, y: np.ndarray, jump: float) -> tuple[np.ndarray, np.ndarray]:
     """Insert a gap where y jumps by more than ``jump`` (angles wrapping at +-180 deg)."""
     at = np.flatnonzero(np.abs(np.diff(y)) > jump) + 1
@@ -145,14 +134,17 @@ def plot_satellite(results: Sequence[Result], out: Path) -> list[Path]:
     sat = [r for r in results if r.is_satellite]
     if not sat:
         return []
+    # the listings' output range limiting and altitude (rfc_out, rku_out), imported only for satellite files
+    from subsims.satellite.transforms import altitude_km, limit_angles
+
     written = [
-        _figure(plt, sat, [_limited_angles_deg(r.signals["attitude.phi"]) for r in sat],
+        _figure(plt, sat, [np.degrees(limit_angles(r.signals["attitude.phi"])) for r in sat],
                 "Euler angles (range-limited output)", ["phi_x (deg)", "phi_y (deg)", "phi_z (deg)"],
                 out / "satellite-euler.png", wrap=180.0),
         _figure(plt, sat, [np.degrees(r.signals["attitude.omega"]) for r in sat], "Body rates",
                 ["omega_x (deg/s)", "omega_y (deg/s)", "omega_z (deg/s)"], out / "satellite-rates.png"),
-        _figure(plt, sat, [np.linalg.norm(r.signals["orbit.R"], axis=1, keepdims=True) / 1000.0 - REARTH_KM
-                           for r in sat], "Altitude", ["altitude (km)"], out / "satellite-altitude.png"),
+        _figure(plt, sat, [altitude_km(r.signals["orbit.R"]) for r in sat], "Altitude", ["altitude (km)"],
+                out / "satellite-altitude.png"),
     ]
     return written
 
