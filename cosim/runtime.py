@@ -145,10 +145,7 @@ class Runtime:
         except Exception as exc:
             raise CosimError("internal", f"advance raised {type(exc).__name__}: {exc}") from None
         checked = self._check_outputs(outputs, times)
-        try:
-            end_state = self._check_state(end_state, state.size, "advance() returned end state")
-        except CosimError as exc:  # the model broke its contract: not the caller's fault
-            raise CosimError("internal" if "shape" in exc.message else "model_error", exc.message) from None
+        end_state = self._check_state(end_state, state.size, "advance() returned end state", from_model=True)
         if trial is not None:
             self._commit(trial)
         self.trial = _Trial(self.epoch, float(times[-1]), end_state)
@@ -238,16 +235,19 @@ class Runtime:
         return f
 
     @staticmethod
-    def _check_state(state: Any, size: int | None, what: str) -> np.ndarray:
+    def _check_state(state: Any, size: int | None, what: str, from_model: bool = False) -> np.ndarray:
+        """``from_model``: a state ``advance()`` returned. Its faults are not the caller's: a wrong shape
+        breaks the model contract (``internal``), anything else is ``model_error``."""
+        bad = "model_error" if from_model else "bad_value"
         try:
             s = np.asarray(state, dtype=np.float64)
         except (TypeError, ValueError):
-            raise CosimError("bad_value", f"{what} is not a float vector") from None
+            raise CosimError(bad, f"{what} is not a float vector") from None
         if s.ndim != 1 or (size is not None and s.size != size):
             want = f"({size},)" if size is not None else "1-D"
-            raise CosimError("bad_value", f"{what} must have shape {want}, got {s.shape}")
+            raise CosimError("internal" if from_model else "bad_value", f"{what} must have shape {want}, got {s.shape}")
         if not np.isfinite(s).all():
-            raise CosimError("bad_value", f"{what} contains NaN or inf")
+            raise CosimError(bad, f"{what} contains NaN or inf")
         return _readonly(s)
 
     def _input_function(

@@ -173,3 +173,22 @@ def test_commands_before_configure_are_refused() -> None:
     with pytest.raises(SubsimError) as err:
         h.run_interval(TIMES, {"u": np.zeros((N, 1))})
     assert err.value.code == "not_configured"
+
+
+@pytest.mark.parametrize(("end_state", "code"), [(np.zeros(3), "internal"), (np.array([np.nan, 0.0]), "model_error"),
+                                                 ("garbage", "model_error")])
+def test_a_bad_end_state_from_the_model_is_not_the_callers_fault(end_state, code: str) -> None:
+    class Broken(Integrator):
+        def advance(self, state, times, u):
+            outputs, _ = super().advance(state, times, u)
+            return outputs, end_state
+
+    h = InProcessHandle(Broken(), name="broken")
+    h.configure({"size": 2})
+    before = committed(h)
+    with pytest.raises(SubsimError) as err:
+        h.run_interval(TIMES, ramp(TIMES))
+    assert err.value.code == code and "advance() returned end state" in err.value.message
+    assert committed(h) == before
+    with pytest.raises(SubsimError, match="no_trial|commit without"):
+        h.commit()
