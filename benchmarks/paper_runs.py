@@ -116,10 +116,8 @@ def physics_per_stage(case: int, repeats: int = 2000) -> dict[str, float]:
     return seconds
 
 
-def sequential_round_trips(method: str, hist: Counter, subsims: int = 3) -> float:
-    """Round trips an interval waits for one after the other, on average (commits ride on runs)."""
-    intervals = sum(hist.values())
-    stages = sum(k * v for k, v in hist.items()) / intervals
+def sequential_round_trips(method: str, stages: float, subsims: int = 3) -> float:
+    """Round trips an interval of ``stages`` stages waits for one after the other (commits ride on runs)."""
     return stages * (subsims if method == "distributed" else 1)
 
 
@@ -198,7 +196,7 @@ def report_case(case: int, out: Path, timings: dict, window: float, level: float
                 hist = stages_histogram(diag)
                 stages = sum(k * v for k, v in hist.items()) / sum(hist.values())
                 per_interval = u["wall_s"] / tm["intervals"]
-                trips = sequential_round_trips(method, hist)
+                trips = sequential_round_trips(method, stages)
                 transport = trips * rtt / per_interval
                 work = stages * (sum(physics.values()) if method == "distributed" else max(physics.values()))
                 line += (f"\n    floors: transport {trips:.1f} sequential round trips x {rtt * 1e6:.0f} us = "

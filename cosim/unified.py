@@ -23,6 +23,7 @@ import numpy as np
 
 from cosim.coupler.relaxation import Interval, RunSummary
 from cosim.importing import import_object
+from cosim.results import ResultWriter, diag_path
 from cosim.runner import RunReport, default_output, open_session, output_signals
 from cosim.scenario import Scenario, ScenarioError
 
@@ -84,8 +85,6 @@ def run_unified(scenario: Scenario, stop: float | None = None, output: Path | No
             raise ScenarioError(f"{scenario.path}: [unified.function] {ref} has shape {v.shape}, "
                                 f"expected ({n_steps + 1}, {size})")
         columns[str(ref)] = v
-
-    from cosim.results import ResultWriter, diag_path
 
     summary = RunSummary(start)
     writer = ResultWriter(output, signals)
