@@ -18,12 +18,16 @@ case has). Prints, per case:
 * the largest deviation from the unified reference in each 1,000 s window: Euler angles (deg, the
   range-limited output angles as plotted in the paper, differences wrapped to +-180) and position (m);
 * the time at which the deviation first exceeds 1 deg (the paper: case 3 at about 45,000 s);
-* the floors of each coupled run, as multiples of RK-U's wall time per interval: the transport floor (the
-  round trips one interval waits for in sequence -- RF-D: every subsim of every stage; RF-C: one per
-  stage, the subsims of a stage answering concurrently -- times the median ``status`` round trip to a
-  subsim process measured in the same benchmark) and the physics floor (the models' own integration for
-  that many stages, timed here with no framework, transport or output; RF-C counts only the slowest
-  subsim of a stage, as if all ran in parallel). Their sum bounds the speed ratio from below.
+* lower bounds under each coupled run's ratio, as multiples of RK-U's wall time per interval:
+  - transport: the round trips one interval waits for in sequence (RF-D: every subsim of every stage;
+    RF-C: one per stage, the subsims of a stage answering concurrently) times the median ``status``
+    round trip to a subsim process, measured in the same benchmark;
+  - physics alone: the models' own integration for that many stages, with no framework, transport or
+    output (RF-C counts only the slowest subsim of a stage, as if all ran in parallel);
+  - one process: the same coupled run with every subsim in this process (no transport), timed over
+    the first 400 s. For RF-D, where one request runs at a time, transport + one process bounds the
+    ratio. For RF-C, whose subsims compute concurrently, the CPU bound does: the one-process time plus
+    each request's Zenoh and codec CPU (measured on ``status``), spread over the machine's cores.
 """
 
 from __future__ import annotations
@@ -31,8 +35,10 @@ from __future__ import annotations
 import argparse
 import csv
 import json
+import os
 import resource
 import sys
+import tempfile
 import time
 from collections import Counter
 from pathlib import Path
@@ -42,6 +48,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from cosim import handles  # noqa: E402
 from cosim.launch import Bus  # noqa: E402
 from cosim.results import read_results  # noqa: E402
 from cosim.runner import run_scenario  # noqa: E402
@@ -51,6 +58,8 @@ from subsims.satellite.transforms import limit_angles  # noqa: E402
 
 METHODS = ("unified", "distributed", "centralized")
 SHORT = {"unified": "RK-U", "distributed": "RF-D", "centralized": "RF-C"}
+BARS = {"distributed": 4.0, "centralized": 6.0}  # the paper's CPU ratios to RK-U on one processor
+ONE_PROCESS_SPAN = 400.0  # s of problem time over which the one-process floor is measured
 
 
 def cpu_seconds() -> float:
@@ -73,10 +82,19 @@ def run_one(case: int, method: str, stop: float, out: Path, inprocess: bool) -> 
             "transport": "in-process" if inprocess or method == "unified" else "zenoh"}
 
 
-def status_round_trip(calls: int = 500) -> float:
-    """Median round trip (s) of ``status`` to an aero subsim process on this machine: no model work."""
+def process_cpu_seconds(pid: int) -> float:
+    """CPU time (user + system) of another process so far, from /proc (Linux; clock-tick resolution)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def status_round_trip(calls: int = 500, cpu_calls: int = 3000) -> dict[str, float]:
+    """``status`` to an aero subsim process (no model work): the median round trip (s), and the CPU (s)
+    one request costs both processes together (Zenoh, codec, dispatch), counted with the coordinator
+    blocking for the reply instead of polling so that its waiting is not counted as work."""
     with Bus.open() as bus:
-        handle = bus.spawn("subsims.aero", name="aero", quiet=True).handle
+        process = bus.spawn("subsims.aero", name="aero", quiet=True)
+        handle = process.handle
         for _ in range(50):
             handle.status()
         times = []
@@ -84,7 +102,25 @@ def status_round_trip(calls: int = 500) -> float:
             start = time.perf_counter()
             handle.status()
             times.append(time.perf_counter() - start)
-    return float(np.median(times))
+        polling, handles.POLL_SECONDS = handles.POLL_SECONDS, 0.0
+        try:
+            own, theirs = time.process_time(), process_cpu_seconds(process.popen.pid)
+            for _ in range(cpu_calls):
+                handle.status()
+            cpu = time.process_time() - own + process_cpu_seconds(process.popen.pid) - theirs
+        finally:
+            handles.POLL_SECONDS = polling
+    return {"rtt_s": float(np.median(times)), "cpu_s": cpu / cpu_calls}
+
+
+def one_process_per_interval(case: int, method: str, stop: float) -> float:
+    """Wall seconds per interval of the same coupled run with every subsim in this process (no transport)."""
+    scenario = load(ROOT / "scenarios" / "satellite" / f"case{case}.toml")
+    with tempfile.TemporaryDirectory() as tmp:
+        start = time.perf_counter()
+        report = run_scenario(scenario, method=method, stop=stop, output=Path(tmp) / "run.csv", inprocess=True,
+                              progress=False, log=lambda m: None)
+        return (time.perf_counter() - start) / report.summary.intervals
 
 
 def physics_per_stage(case: int, repeats: int = 2000) -> dict[str, float]:
@@ -166,6 +202,40 @@ def first_exceeding(t: np.ndarray, dev: np.ndarray, level: float) -> float | Non
     return float(t[above[0]]) if above.size else None
 
 
+def print_floors(method: str, stages: float, rk_u: float, rtt: float, request_cpu: float | None,
+                 physics: dict[str, float], one_process: float | None) -> None:
+    """Lower bounds under a coupled run's wall time per interval, as multiples of RK-U's (``rk_u`` s).
+
+    Two of each: the models' physics and the bus alone, and this framework's work (the same run timed in
+    one process) with the bus. RF-D runs one request at a time, so transport and work add up; RF-C's
+    subsims compute concurrently, so its bound is also the CPU all processes need, over the cores.
+    """
+    trips = sequential_round_trips(method, stages)
+    transport = trips * rtt / rk_u
+    every_model = stages * sum(physics.values()) / rk_u
+    slowest_model = stages * max(physics.values()) / rk_u
+    requests, cores = stages * len(physics), os.cpu_count() or 1
+    print(f"    floors, as multiples of RK-U: transport {trips:.1f} sequential round trips x {rtt * 1e6:.0f} us = "
+          f"{transport:.1f}x; physics alone {every_model if method == 'distributed' else slowest_model:.1f}x"
+          + (f"; each request's Zenoh and codec CPU {request_cpu * 1e6:.0f} us" if request_cpu else ""))
+
+    def bound(work: float) -> str:
+        if method == "distributed":
+            return f"transport + work = {transport + work:.1f}x"
+        if not request_cpu:
+            return "(no request CPU measured)"
+        cpu = work + requests * request_cpu / rk_u
+        return f"CPU of the work and {requests:.0f} requests over {cores} cores = {cpu / cores:.1f}x"
+
+    models_only = bound(every_model)
+    if method == "centralized":
+        models_only = f"transport + slowest model = {transport + slowest_model:.1f}x; " + models_only
+    print(f"      the models and the bus only: {models_only}   (bar {BARS[method]:g}x)")
+    if one_process is not None:
+        alone = one_process / rk_u
+        print(f"      this framework (the same run in one process, no transport: {alone:.1f}x): {bound(alone)}")
+
+
 def report_case(case: int, out: Path, timings: dict, window: float, level: float) -> None:
     print(f"\n=== case {case} ===")
     for method in METHODS:
@@ -184,25 +254,20 @@ def report_case(case: int, out: Path, timings: dict, window: float, level: float
             line += "  stages/interval: " + ", ".join(f"{k}: {v}" for k, v in sorted(hist.items()))
         print(line)
     u = timings.get(f"case{case}-unified")
-    rtt = timings.get("status_round_trip_s")
+    rtt = timings.get("status_rtt_s", timings.get("status_round_trip_s"))  # older files: the round trip only
+    request_cpu = timings.get("status_cpu_s")
     for method in ("distributed", "centralized"):
         tm = timings.get(f"case{case}-{method}")
         if u and tm and tm["stop"] == u["stop"]:
-            line = (f"  speed {SHORT[method]}/RK-U: wall {tm['wall_s'] / u['wall_s']:.1f}x, "
-                    f"cpu {tm['cpu_s'] / u['cpu_s']:.1f}x   (paper, CPU: {'4' if method == 'distributed' else '6'}x)")
+            print(f"  speed {SHORT[method]}/RK-U: wall {tm['wall_s'] / u['wall_s']:.1f}x, "
+                  f"cpu {tm['cpu_s'] / u['cpu_s']:.1f}x   (paper, CPU: {BARS[method]:g}x)")
             diag = out / f"case{case}-{method}.diag.csv"
             physics = timings.get(f"case{case}-physics_per_stage_s")
             if rtt and physics and tm["transport"] == "zenoh" and diag.exists() and tm["intervals"]:
                 hist = stages_histogram(diag)
                 stages = sum(k * v for k, v in hist.items()) / sum(hist.values())
-                per_interval = u["wall_s"] / tm["intervals"]
-                trips = sequential_round_trips(method, stages)
-                transport = trips * rtt / per_interval
-                work = stages * (sum(physics.values()) if method == "distributed" else max(physics.values()))
-                line += (f"\n    floors: transport {trips:.1f} sequential round trips x {rtt * 1e6:.0f} us = "
-                         f"{transport:.1f}x, physics {work * 1e6:.0f} us per interval = {work / per_interval:.1f}x, "
-                         f"together {transport + work / per_interval:.1f}x RK-U")
-            print(line)
+                one_process = timings.get(f"case{case}-{method}-one_process_s")
+                print_floors(method, stages, u["wall_s"] / tm["intervals"], rtt, request_cpu, physics, one_process)
 
     runs = load_case(out, case)
     pairs = [(m, "unified") for m in ("distributed", "centralized") if m in runs and "unified" in runs]
@@ -249,11 +314,17 @@ def main(argv: list[str] | None = None) -> int:
     timings = json.loads(timing_file.read_text()) if timing_file.exists() else {}
     if not args.analyze_only:
         if not args.inprocess and set(args.methods) - {"unified"}:
-            timings["status_round_trip_s"] = status_round_trip()
-            print(f"status round trip to a subsim process: {timings['status_round_trip_s'] * 1e6:.0f} us (median)",
-                  file=sys.stderr, flush=True)
+            status = status_round_trip()
+            timings.pop("status_round_trip_s", None)
+            timings["status_rtt_s"], timings["status_cpu_s"] = status["rtt_s"], status["cpu_s"]
+            print(f"status to a subsim process: round trip {status['rtt_s'] * 1e6:.0f} us (median), "
+                  f"CPU {status['cpu_s'] * 1e6:.0f} us per request", file=sys.stderr, flush=True)
         for case in args.cases:
             timings[f"case{case}-physics_per_stage_s"] = physics_per_stage(case)
+            if not args.inprocess:
+                for method in (m for m in METHODS if m in args.methods and m != "unified"):
+                    timings[f"case{case}-{method}-one_process_s"] = one_process_per_interval(
+                        case, method, min(args.stop, ONE_PROCESS_SPAN))
             for method in (m for m in METHODS if m in args.methods):
                 key = f"case{case}-{method}"
                 timings.pop(key, None)
