@@ -2,11 +2,10 @@
 
 * Every output signal ``<subsim>.<port>`` gets ``<out>/<subsim>.<port>.png``: one panel per component
   against time, one line per file that has it (``--signals`` selects columns or prefixes).
-* Files of the paper's satellite (columns ``attitude.phi``, ``attitude.omega``, ``orbit.R``) also get,
-  unless ``--signals`` is given, the paper's figures: ``satellite-euler.png`` (Euler angles, deg,
-  range-limited as the listings print them; figs. 8-10), ``satellite-rates.png`` (body rates, deg/s;
-  figs. 11-13) and ``satellite-altitude.png`` (|R|/1000 - 6367.65 km; figs. 14-19: pass the RF-D and
-  RK-U files of all cases for the case-method overlay of figs. 17-19).
+* Unless ``--signals`` is given, every installed figure provider adds its own figures: a function
+  ``figures(results, out) -> list[Path]`` registered in the ``cosim.figures`` entry-point group, which
+  draws with :func:`figure` and returns nothing for files that are not its own. This project registers
+  the paper's satellite figures (``subsims/satellite/plots.py``).
 
 Lines are labelled with the file names. Long runs are drawn through a min/max envelope per pixel
 column, so 600,000 samples plot fast and oscillations do not alias away. matplotlib is an optional
@@ -19,14 +18,15 @@ import argparse
 import math
 import re
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from importlib.metadata import entry_points
 from pathlib import Path
 
 import numpy as np
 
 from cosim.results import read_results
 
-SATELLITE = ("attitude.phi", "attitude.omega", "orbit.R")
+FIGURES_GROUP = "cosim.figures"
 MAX_POINTS = 4000  # envelope buckets per line
 _COLUMN = re.compile(r"^(?P<signal>[^\[]+)\[(?P<index>\d+)\]$")
 
@@ -77,10 +77,6 @@ class Result:
         self.t = self.t[keep]
         self.signals = {s: v[keep] for s, v in self.signals.items()}
 
-    @property
-    def is_satellite(self) -> bool:
-        return all(s in self.signals and self.signals[s].shape[1] == 3 for s in SATELLITE)
-
 
 def envelope(t: np.ndarray, y: np.ndarray, points: int = MAX_POINTS) -> tuple[np.ndarray, np.ndarray]:
     """(t, y) reduced to the min and max of each of ``points`` buckets, in time order."""
@@ -105,9 +101,11 @@ def break_wraps(t: np.ndarray, y: np.ndarray, jump: float) -> tuple[np.ndarray, 
     return np.insert(t, at, np.nan), np.insert(y, at, np.nan)
 
 
-def _figure(plt, results: Sequence[Result], series: list[np.ndarray], title: str, ylabels: Sequence[str],
-            path: Path, wrap: float | None = None) -> Path:
-    """One panel per column of the series; one line per result (gaps at jumps > ``wrap``)."""
+def figure(results: Sequence[Result], series: list[np.ndarray], title: str, ylabels: Sequence[str],
+           path: Path, wrap: float | None = None) -> Path:
+    """Write one PNG: a panel per column of the series (``ylabels``), a line per result, gaps where a
+    line jumps by more than ``wrap``; ``series[i]`` is (samples of ``results[i]``, columns)."""
+    plt = _pyplot()
     rows = len(ylabels)
     fig, axes = plt.subplots(rows, 1, sharex=True, figsize=(10, 2.4 * rows + 0.8), squeeze=False)
     for k, ax in enumerate(axes[:, 0]):
@@ -128,25 +126,15 @@ def _figure(plt, results: Sequence[Result], series: list[np.ndarray], title: str
     return path
 
 
-def plot_satellite(results: Sequence[Result], out: Path) -> list[Path]:
-    """The paper's figures: Euler angles, body rates, altitude, every file overlaid."""
-    plt = _pyplot()
-    sat = [r for r in results if r.is_satellite]
-    if not sat:
-        return []
-    # the listings' output range limiting and altitude (rfc_out, rku_out), imported only for satellite files
-    from subsims.satellite.transforms import altitude_km, limit_angles
-
-    written = [
-        _figure(plt, sat, [np.degrees(limit_angles(r.signals["attitude.phi"])) for r in sat],
-                "Euler angles (range-limited output)", ["phi_x (deg)", "phi_y (deg)", "phi_z (deg)"],
-                out / "satellite-euler.png", wrap=180.0),
-        _figure(plt, sat, [np.degrees(r.signals["attitude.omega"]) for r in sat], "Body rates",
-                ["omega_x (deg/s)", "omega_y (deg/s)", "omega_z (deg/s)"], out / "satellite-rates.png"),
-        _figure(plt, sat, [altitude_km(r.signals["orbit.R"]) for r in sat], "Altitude", ["altitude (km)"],
-                out / "satellite-altitude.png"),
-    ]
-    return written
+def figure_providers() -> list[tuple[str, Callable[[Sequence[Result], Path], list[Path]]]]:
+    """(name, figures function) of every installed ``cosim.figures`` entry point, by name."""
+    providers = []
+    for entry in sorted(entry_points(group=FIGURES_GROUP), key=lambda e: e.name):
+        try:
+            providers.append((entry.name, entry.load()))
+        except Exception as exc:  # a broken provider must not hide the generic plots
+            raise PlotError(f"figure provider {entry.name!r} ({entry.value}) failed to load: {exc}") from None
+    return providers
 
 
 def _selected(signal: str, size: int, wanted: Sequence[str] | None) -> list[int]:
@@ -163,7 +151,6 @@ def _selected(signal: str, size: int, wanted: Sequence[str] | None) -> list[int]
 
 def plot_signals(results: Sequence[Result], out: Path, wanted: Sequence[str] | None = None) -> list[Path]:
     """Generic: one PNG per output signal, one panel per (selected) component, every file overlaid."""
-    plt = _pyplot()
     order: dict[str, int] = {}
     for r in results:
         for s, v in r.signals.items():
@@ -175,7 +162,7 @@ def plot_signals(results: Sequence[Result], out: Path, wanted: Sequence[str] | N
             continue
         having = [r for r in results if signal in r.signals and r.signals[signal].shape[1] == size]
         name = re.sub(r"[^A-Za-z0-9_.-]", "_", signal)
-        written.append(_figure(plt, having, [r.signals[signal][:, comps] for r in having], signal,
+        written.append(figure(having, [r.signals[signal][:, comps] for r in having], signal,
                                [f"{signal}[{i}]" for i in comps], out / f"{name}.png"))
     return written
 
@@ -195,7 +182,10 @@ def plot_files(paths: Sequence[Path], out: Path, signals: Sequence[str] | None =
     if empty:
         raise PlotError(f"no samples in {', '.join(empty)}{' inside the window' if window is not None else ''}")
     out.mkdir(parents=True, exist_ok=True)
-    written = [] if signals else plot_satellite(results, out)
+    written = []
+    if not signals:
+        for _, figures in figure_providers():
+            written += figures(results, out)
     written += plot_signals(results, out, signals)
     if not written:
         raise PlotError(f"nothing matches --signals {' '.join(signals or [])}")

@@ -13,6 +13,7 @@ pytest.importorskip("matplotlib")
 
 from matplotlib.image import imread  # noqa: E402
 
+from cosim import plot as cosim_plot  # noqa: E402
 from cosim.cli import main as cosim_main  # noqa: E402
 from cosim.plot import PlotError, envelope, plot_command, plot_files  # noqa: E402
 from cosim.scenario import load  # noqa: E402
@@ -94,6 +95,35 @@ def test_errors_are_reported(tmp_path: Path, capsys: pytest.CaptureFixture, monk
     monkeypatch.setitem(sys.modules, "matplotlib", None)  # as if not installed
     assert cosim_main(["plot", str(generic_result(tmp_path / "a.csv")), "--out", str(tmp_path)]) == 2
     assert "pip install 'cosim[plot]'" in capsys.readouterr().err
+
+
+class _Entry:
+    """Stands in for an importlib.metadata entry point of the ``cosim.figures`` group."""
+
+    def __init__(self, name: str, load) -> None:
+        self.name, self.value, self.load = name, f"tests:{name}", load
+
+
+def test_figure_providers_are_called_and_a_broken_one_is_named(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    seen = []
+
+    def figures(results, out):
+        seen.append([r.label for r in results])
+        return [out / "mine.png"]
+
+    def broken():
+        raise ImportError("no module named 'gone'")
+
+    a = generic_result(tmp_path / "a.csv")
+    monkeypatch.setattr(cosim_plot, "entry_points", lambda group: [_Entry("mine", lambda: figures)])
+    written = plot_files([a], tmp_path / "png")
+    assert seen == [["a"]] and written[0] == tmp_path / "png" / "mine.png"
+    assert plot_files([a], tmp_path / "png", signals=["m1.u"])[0].name == "m1.u.png" and len(seen) == 1
+    monkeypatch.setattr(cosim_plot, "entry_points", lambda group: [_Entry("broken", broken)])
+    with pytest.raises(PlotError, match=r"figure provider 'broken' \(tests:broken\) failed to load: no module"):
+        plot_files([a], tmp_path / "png")
 
 
 def test_envelope_keeps_extremes_in_order() -> None:
