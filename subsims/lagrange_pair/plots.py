@@ -66,11 +66,14 @@ def _plt():
 STYLES = ["-", "--", ":", "-."]
 
 
-def _save(plt, fig, ax, title: str, path: Path) -> Path:
-    """Grid and legend on every panel, a title, and the PNG written to ``path``."""
+def _grid_and_legend(ax, which: str = "major") -> None:
     for a in ax.flat:
-        a.grid(True, alpha=0.3)
+        a.grid(True, which=which, alpha=0.3)
         a.legend(fontsize=7)
+
+
+def _save(plt, fig, title: str, path: Path) -> Path:
+    """The figure's title, and the PNG written to ``path``."""
     fig.suptitle(title)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
@@ -123,7 +126,8 @@ def plot_trajectory(results: Sequence[Result], out: Path) -> Path:
     ax[0, 1].set(xlabel="t [s]", ylabel="altitude [ft]", title="altitude")
     ax[1, 0].set(xlabel="t [s]", ylabel="speed [ft/s]", title="inertial speed")
     ax[1, 1].set(xlabel="t [s]", ylabel="east [ft]", title="east drift")
-    return _save(plt, fig, ax, "SRB + drogue: trajectories (I frame: north, east, down)", out / "trajectory.png")
+    _grid_and_legend(ax)
+    return _save(plt, fig, "SRB + drogue: trajectories (I frame: north, east, down)", out / "trajectory.png")
 
 
 def plot_attitude(results: Sequence[Result], out: Path) -> Path:
@@ -153,12 +157,8 @@ def plot_attitude(results: Sequence[Result], out: Path) -> Path:
     ax[2, 1].set(xlabel="t [s]")
     ax[0, 0].set_title("3-2-1 Euler angles relative to I (unwrapped)")
     ax[0, 1].set_title("angular velocity, body axes")
-    fig.suptitle("SRB + drogue: attitude (psi and phi are ill-conditioned as theta nears +-90 deg)")
-    fig.tight_layout()
-    path = out / "attitude.png"
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    title = "SRB + drogue: attitude (psi and phi are ill-conditioned as theta nears +-90 deg)"
+    return _save(plt, fig, title, out / "attitude.png")
 
 
 def plot_joint_force(results: Sequence[Result], out: Path) -> Path:
@@ -181,8 +181,8 @@ def plot_joint_force(results: Sequence[Result], out: Path) -> Path:
     ax[0, 1].set(ylabel="[lbf]", title="swivel force, lateral components (C axes)")
     ax[1, 0].set(xlabel="t [s]", ylabel="[ft]", title="joint violation |attach B - attach C|, max per 0.5 s")
     ax[1, 1].set(xlabel="t [s]", ylabel="[ft/s]", title="joint velocity violation |A Omega| (eq. 12), max per 0.5 s")
-    title = "SRB + drogue: joint force (Lagrange multiplier) and constraint"
-    return _save(plt, fig, ax, title, out / "joint_force.png")
+    _grid_and_legend(ax)
+    return _save(plt, fig, "SRB + drogue: joint force (Lagrange multiplier) and constraint", out / "joint_force.png")
 
 
 def plot_loads(results: Sequence[Result], out: Path) -> Path | None:
@@ -199,17 +199,10 @@ def plot_loads(results: Sequence[Result], out: Path) -> Path | None:
             for j, comp in enumerate("xyz"):
                 a.plot(r.t, v[:, j], f"C{j}" + ls, label=f"{comp} ({r.label})")
             a.set(title=f"{r.aero}.{port} (body axes)", ylabel=f"[{unit}]")
-    for a in ax.flat:
-        a.grid(True, alpha=0.3)
-        a.legend(fontsize=7)
+    _grid_and_legend(ax)
     ax[1, 0].set(xlabel="t [s]")
     ax[1, 1].set(xlabel="t [s]")
-    fig.suptitle("aerodynamic loads passed over the coupling")
-    fig.tight_layout()
-    path = out / "loads.png"
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(plt, fig, "aerodynamic loads passed over the coupling", out / "loads.png")
 
 
 def plot_reference(results: Sequence[Result], out: Path) -> Path:
@@ -233,14 +226,9 @@ def plot_reference(results: Sequence[Result], out: Path) -> Path:
     ax[2].set(title="multiplier difference, max over components", ylabel="[lbf]")
     for a in ax:
         a.set(xlabel="t [s]")
-        a.grid(True, which="both", alpha=0.3)
-        a.legend(fontsize=7)
-    fig.suptitle("coupled run minus the pair with built-in aerodynamics (model.run_reference, default deck)")
-    fig.tight_layout()
-    path = out / "coupled_vs_builtin.png"
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    _grid_and_legend(ax, which="both")
+    title = "coupled run minus the pair with built-in aerodynamics (model.run_reference, default deck)"
+    return _save(plt, fig, title, out / "coupled_vs_builtin.png")
 
 
 def main(argv: Sequence[str] | None = None) -> int:
