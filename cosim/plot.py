@@ -127,13 +127,14 @@ def figure(results: Sequence[Result], series: list[np.ndarray], title: str, ylab
 
 
 def figure_providers() -> list[tuple[str, Callable[[Sequence[Result], Path], list[Path]]]]:
-    """(name, figures function) of every installed ``cosim.figures`` entry point, by name."""
+    """(name, figures function) of every installed ``cosim.figures`` entry point that loads, by name."""
     providers = []
     for entry in sorted(entry_points(group=FIGURES_GROUP), key=lambda e: e.name):
         try:
             providers.append((entry.name, entry.load()))
-        except Exception as exc:  # a broken provider must not hide the generic plots
-            raise PlotError(f"figure provider {entry.name!r} ({entry.value}) failed to load: {exc}") from None
+        except Exception as exc:  # a broken provider must not hide the generic plots: say so, go on
+            print(f"cosim plot: skipping figure provider {entry.name!r} ({entry.value}), which failed to load: "
+                  f"{exc}", file=sys.stderr)
     return providers
 
 
