@@ -52,7 +52,7 @@ from cosim import handles  # noqa: E402
 from cosim.launch import Bus  # noqa: E402
 from cosim.results import read_results  # noqa: E402
 from cosim.runner import run_scenario  # noqa: E402
-from cosim.scenario import load  # noqa: E402
+from cosim.scenario import Scenario, load  # noqa: E402
 from cosim.unified import run_unified  # noqa: E402
 from subsims.satellite.transforms import limit_angles  # noqa: E402
 
@@ -67,15 +67,19 @@ def cpu_seconds() -> float:
     return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
 
 
-def run_one(case: int, method: str, stop: float, out: Path, inprocess: bool) -> dict:
-    scenario = load(ROOT / "scenarios" / "satellite" / f"case{case}.toml")
+def case_scenario(case: int) -> Scenario:
+    return load(ROOT / "scenarios" / "satellite" / f"case{case}.toml")
+
+
+def run_one(case: int, method: str, stop: float, out: Path, inprocess: bool, progress: bool = True) -> dict:
+    scenario = case_scenario(case)
     output = out / f"case{case}-{method}.csv"
     wall, cpu = time.perf_counter(), cpu_seconds()
     if method == "unified":
         report = run_unified(scenario, stop=stop, output=output)
     else:
         report = run_scenario(scenario, method=method, stop=stop, output=output, inprocess=inprocess,
-                              progress=True, log=lambda m: None)
+                              progress=progress, log=lambda m: None)
     wall, cpu = time.perf_counter() - wall, cpu_seconds() - cpu
     return {"wall_s": wall, "cpu_s": cpu, "stop": stop, "t_end": report.summary.t_end,
             "intervals": report.summary.intervals, "stages": dict(report.summary.stages),
@@ -115,12 +119,9 @@ def status_round_trip(calls: int = 500, cpu_calls: int = 3000) -> dict[str, floa
 
 def one_process_per_interval(case: int, method: str, stop: float) -> float:
     """Wall seconds per interval of the same coupled run with every subsim in this process (no transport)."""
-    scenario = load(ROOT / "scenarios" / "satellite" / f"case{case}.toml")
     with tempfile.TemporaryDirectory() as tmp:
-        start = time.perf_counter()
-        report = run_scenario(scenario, method=method, stop=stop, output=Path(tmp) / "run.csv", inprocess=True,
-                              progress=False, log=lambda m: None)
-        return (time.perf_counter() - start) / report.summary.intervals
+        run = run_one(case, method, stop, Path(tmp), inprocess=True, progress=False)
+    return run["wall_s"] / run["intervals"]
 
 
 def physics_per_stage(case: int, repeats: int = 2000) -> dict[str, float]:
@@ -131,8 +132,7 @@ def physics_per_stage(case: int, repeats: int = 2000) -> dict[str, float]:
     from subsims.orbit.model import OrbitParams
     from subsims.orbit.model import integrate as orbit_integrate
 
-    scenario = load(ROOT / "scenarios" / "satellite" / f"case{case}.toml")
-    params = {name: spec.params for name, spec in scenario.subsims.items()}
+    params = {name: spec.params for name, spec in case_scenario(case).subsims.items()}
     orbit, attitude = OrbitParams.from_mapping(params["orbit"]), AttitudeParams.from_mapping(params["attitude"])
     aero = AeroParams.from_mapping(params["aero"])
     x_orbit, x_attitude = orbit.initial_state().tolist(), attitude.initial_state().tolist()

@@ -164,7 +164,7 @@ def plot_signals(results: Sequence[Result], out: Path, wanted: Sequence[str] | N
         having = [r for r in results if signal in r.signals and r.signals[signal].shape[1] == size]
         name = re.sub(r"[^A-Za-z0-9_.-]", "_", signal)
         written.append(figure(having, [r.signals[signal][:, comps] for r in having], signal,
-                               [f"{signal}[{i}]" for i in comps], out / f"{name}.png"))
+                              [f"{signal}[{i}]" for i in comps], out / f"{name}.png"))
     return written
 
 
