@@ -7,8 +7,8 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from cosim.contract import SubsimError
 from cosim.coupler.relaxation import METHODS, Coordinator, NotConverged
-from cosim.protocol.errors import SubsimError
 from cosim.runner import open_session, run_scenario
 from cosim.scenario import ScenarioError, load
 

@@ -16,8 +16,8 @@ from typing import Any
 import numpy as np
 import zenoh
 
+from cosim.contract import CosimError, ProtocolError, SubsimDied, SubsimError
 from cosim.protocol.bus import alive_key, check_name, rpc_key
-from cosim.protocol.errors import CosimError, ProtocolError, SubsimDied, SubsimError
 from cosim.protocol.messages import ErrorInfo, decode_reply, encode_request
 from cosim.runtime import DEFAULT_HISTORY, Runtime
 from cosim.subsim import Port, Subsim

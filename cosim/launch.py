@@ -13,9 +13,9 @@ from dataclasses import dataclass, field
 
 import zenoh
 
+from cosim.contract import SubsimError
 from cosim.handles import RemoteHandle
 from cosim.protocol.bus import coordinator_alive_key, new_run_id, open_router
-from cosim.protocol.errors import SubsimError
 
 
 def subsim_command(

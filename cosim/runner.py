@@ -10,12 +10,12 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from cosim.contract import SubsimError
 from cosim.coupler.couplings import SignalRef, check_couplings
 from cosim.coupler.relaxation import Coordinator, Interval, RunSummary
 from cosim.handles import Description, InProcessHandle, SubsimHandle
 from cosim.launch import Bus, subsim_command
 from cosim.progress import Progress
-from cosim.protocol.errors import SubsimError
 from cosim.results import ResultWriter, diag_path
 from cosim.scenario import Scenario, ScenarioError
 

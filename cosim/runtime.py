@@ -14,8 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from cosim.protocol.errors import CosimError
-from cosim.protocol.messages import PROTOCOL_VERSION
+from cosim.contract import PROTOCOL_VERSION, CosimError
 from cosim.signals import SCHEMES, SegmentError, check_time_grid, interpolant
 from cosim.subsim import ModelError, Port, Subsim, as_ports
 
@@ -280,7 +279,7 @@ class Runtime:
             start += port.size
         at = interpolant(times, np.hstack(columns), interp)  # times and values checked above
         items = tuple(slices.items())
-        return lambda t: (lambda x: {k: x[s] for k, s in items})(at(t))
+        return lambda t: (lambda x: {k: x[..., s] for k, s in items})(at(t))
 
     def _check_outputs(self, outputs: Mapping[str, Any], times: np.ndarray) -> dict[str, np.ndarray]:
         if not isinstance(outputs, Mapping):

@@ -89,7 +89,9 @@ class Subsim:
     ) -> tuple[Mapping[str, np.ndarray], np.ndarray]:
         """Advance from ``state`` at ``times[0]`` over the sample ``times`` (n,).
 
-        ``u(t)`` returns ``{input name: array (size,)}`` interpolated at any ``t`` in the interval.
+        ``u(t)`` returns ``{input name: array (size,)}`` interpolated at any ``t`` in the interval; given a
+        1-D array of times ``(k,)`` it returns ``{input name: array (k, size)}`` in one call (evaluate the
+        inputs an integrator needs once per interval, not once per step).
         Return ``({output name: array (n, size)}, state at times[-1])``. Must be pure: the same
         arguments always give the same result, and ``state`` must not be modified in place.
         """

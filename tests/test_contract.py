@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from cosim.contract import SubsimError
 from cosim.handles import InProcessHandle, SubsimHandle
-from cosim.protocol.errors import SubsimError
 from subsims.integrator.subsim import Integrator
 
 N = 5

@@ -12,8 +12,8 @@ import time
 import numpy as np
 import pytest
 
+from cosim.contract import SubsimDied
 from cosim.launch import Bus, subsim_command
-from cosim.protocol.errors import SubsimDied
 
 TIMES = np.linspace(0.0, 0.4, 5)
 

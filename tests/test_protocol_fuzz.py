@@ -43,7 +43,7 @@ import pytest
 from hypothesis import HealthCheck, assume, event, given, settings
 from hypothesis import strategies as st
 
-from cosim.protocol.errors import ERROR_CODES, ProtocolError
+from cosim.contract import ERROR_CODES, ProtocolError
 from cosim.protocol.messages import (
     PROTOCOL_VERSION,
     REQUESTS,

@@ -9,9 +9,9 @@ import pytest
 import zenoh
 
 from cosim import handles
+from cosim.contract import SubsimError
 from cosim.handles import InProcessHandle
 from cosim.launch import Bus
-from cosim.protocol.errors import SubsimError
 from subsims.integrator.subsim import Integrator
 
 TIMES = np.linspace(0.0, 0.4, 5)

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from cosim.protocol.errors import ProtocolError
+from cosim.contract import PROTOCOL_VERSION, ProtocolError
 from cosim.protocol.wire import (
     Fields,
     check_fields,
@@ -33,8 +33,6 @@ from cosim.protocol.wire import (
     t_str,
     unpack_map,
 )
-
-PROTOCOL_VERSION = 1
 
 DESCRIPTION_FIELDS: Fields = {
     "name": (t_str, True),

@@ -11,8 +11,8 @@ from collections.abc import Callable
 
 import zenoh
 
+from cosim.contract import CosimError
 from cosim.protocol.bus import alive_key, coordinator_alive_key, rpc_key
-from cosim.protocol.errors import CosimError
 from cosim.protocol.messages import decode_request, encode_error, encode_result, request_command
 from cosim.runtime import Runtime
 

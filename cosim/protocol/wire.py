@@ -14,7 +14,7 @@ from typing import Any
 import msgpack
 import numpy as np
 
-from cosim.protocol.errors import ProtocolError
+from cosim.contract import ProtocolError
 
 Checker = Callable[[Any, str], Any]
 

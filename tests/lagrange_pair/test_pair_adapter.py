@@ -7,7 +7,7 @@ from collections.abc import Callable, Mapping
 import numpy as np
 import pytest
 
-from cosim.protocol.errors import CosimError
+from cosim.contract import CosimError
 from cosim.runtime import Runtime
 from cosim.subsim import ModelError, as_ports
 from subsims.lagrange_pair import model as m

@@ -1,6 +1,15 @@
-"""Error codes shared by both ends of the protocol (documented in docs/protocol.md)."""
+"""The subsim contract both ends share: protocol version, commands, error codes and their exceptions.
+
+The lowest layer (documented in docs/protocol.md): the runtime raises these errors, the wire
+carries them, handles re-raise them on the coordinator side. No I/O, no encoding.
+"""
 
 from __future__ import annotations
+
+PROTOCOL_VERSION = 1
+
+COMMANDS = ("describe", "configure", "run_interval", "commit", "rollback", "get_state", "set_state", "status",
+            "shutdown")
 
 # code -> meaning
 ERROR_CODES: dict[str, str] = {
