@@ -72,7 +72,7 @@ def _watch_router(session: zenoh.Session, grace: float = 2.0) -> None:
 
 def main(model_cls: type[Subsim], argv: Sequence[str] | None = None) -> int:
     args = parse_args(model_cls, argv)
-    runtime = Runtime(model_cls(), name=args.name, history_limit=args.history)
+    runtime = Runtime(model_cls, name=args.name, history_limit=args.history)
     signal.signal(signal.SIGTERM, _raise_stop)
     signal.signal(signal.SIGINT, _raise_stop)
     try:

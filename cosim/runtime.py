@@ -6,6 +6,7 @@ Every command either succeeds or raises ``CosimError`` with nothing committed ch
 
 from __future__ import annotations
 
+import copy
 import os
 from collections import deque
 from collections.abc import Callable, Mapping
@@ -38,10 +39,32 @@ def _port_map(ports: Mapping[str, Port]) -> dict[str, dict]:
     return {k: {"size": p.size, "unit": p.unit, "doc": p.doc} for k, p in ports.items()}
 
 
-class Runtime:
-    """Commit/rollback bookkeeping around one :class:`Subsim` model."""
+ModelFactory = Callable[[], Subsim]
 
-    def __init__(self, model: Subsim, name: str | None = None, history_limit: int = DEFAULT_HISTORY) -> None:
+
+def as_factory(model: Subsim | ModelFactory) -> ModelFactory:
+    """A zero-argument callable making fresh model instances. An instance given is a prototype: each
+    ``configure`` works on a deep copy of it, so constructor arguments carry over and a failed
+    configure leaves the running model untouched."""
+    if isinstance(model, Subsim):
+        return lambda: copy.deepcopy(model)
+    if callable(model):
+        return model
+    raise TypeError(f"a subsim model must be a Subsim instance or a factory making one, got {model!r}")
+
+
+class Runtime:
+    """Commit/rollback bookkeeping around one :class:`Subsim` model.
+
+    ``model`` is a :class:`Subsim` instance (a prototype, copied at each ``configure``) or a
+    zero-argument factory such as the class itself or ``functools.partial(MyModel, path)``.
+    """
+
+    def __init__(
+        self, model: Subsim | ModelFactory, name: str | None = None, history_limit: int = DEFAULT_HISTORY
+    ) -> None:
+        self._factory = as_factory(model)
+        model = self._new_model()
         self.model = model
         self.name = name or model.name
         self.history_limit = history_limit
@@ -102,7 +125,7 @@ class Runtime:
     def configure(self, params: Mapping[str, Any], t0: float = 0.0) -> dict:
         """Fresh model instance from ``params``; the old configuration stays if this fails."""
         t0 = self._finite_float(t0, "t0")
-        model = type(self.model)()
+        model = self._new_model()
         try:
             state = model.initial_state(dict(params))
             inputs, outputs = as_ports(model.inputs), as_ports(model.outputs)
@@ -212,6 +235,12 @@ class Runtime:
         return {}
 
     # --- helpers ------------------------------------------------------------------------------
+
+    def _new_model(self) -> Subsim:
+        model = self._factory()
+        if not isinstance(model, Subsim):
+            raise TypeError(f"the model factory made {type(model).__name__}, not a cosim.Subsim")
+        return model
 
     def _set_committed(self, time: float, state: np.ndarray) -> None:
         """Replace the committed state. A trial run before this is now stale (never committed)."""
