@@ -48,7 +48,6 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from cosim import handles  # noqa: E402
 from cosim.launch import Bus  # noqa: E402
 from cosim.results import read_results  # noqa: E402
 from cosim.runner import run_scenario  # noqa: E402
@@ -94,8 +93,8 @@ def process_cpu_seconds(pid: int) -> float:
 
 def status_round_trip(calls: int = 500, cpu_calls: int = 3000) -> dict[str, float]:
     """``status`` to an aero subsim process (no model work): the median round trip (s), and the CPU (s)
-    one request costs both processes together (Zenoh, codec, dispatch), counted with the coordinator
-    blocking for the reply instead of polling so that its waiting is not counted as work."""
+    one request costs both processes together (Zenoh, codec, dispatch); the coordinator blocks while it
+    waits, so its waiting is not counted as work."""
     with Bus.open() as bus:
         process = bus.spawn("subsims.aero", name="aero", quiet=True)
         handle = process.handle
@@ -106,14 +105,10 @@ def status_round_trip(calls: int = 500, cpu_calls: int = 3000) -> dict[str, floa
             start = time.perf_counter()
             handle.status()
             times.append(time.perf_counter() - start)
-        polling, handles.POLL_SECONDS = handles.POLL_SECONDS, 0.0
-        try:
-            own, theirs = time.process_time(), process_cpu_seconds(process.popen.pid)
-            for _ in range(cpu_calls):
-                handle.status()
-            cpu = time.process_time() - own + process_cpu_seconds(process.popen.pid) - theirs
-        finally:
-            handles.POLL_SECONDS = polling
+        own, theirs = time.process_time(), process_cpu_seconds(process.popen.pid)
+        for _ in range(cpu_calls):
+            handle.status()
+        cpu = time.process_time() - own + process_cpu_seconds(process.popen.pid) - theirs
     return {"rtt_s": float(np.median(times)), "cpu_s": cpu / cpu_calls}
 
 

@@ -14,7 +14,8 @@ import time
 
 from cosim.coupler.convergence import Tolerance
 from cosim.coupler.couplings import Coupling
-from cosim.coupler.relaxation import Coordinator, Settings
+from cosim.coupler.relaxation import Settings
+from cosim.driver import Coordinator
 from cosim.handles import InProcessHandle
 from cosim.launch import Bus
 from subsims.integrator.subsim import Integrator

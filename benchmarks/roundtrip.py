@@ -36,9 +36,10 @@ import zenoh
 
 from cosim.handles import InProcessHandle
 from cosim.launch import Bus
-from cosim.protocol.bus import client_config, coordinator_alive_key
+from cosim.protocol.keys import coordinator_alive_key
 from cosim.protocol.messages import decode_reply, decode_request, encode_request, encode_result
-from cosim.protocol.server import answer
+from cosim.protocol.service import answer
+from cosim.protocol.transport.session import client_config
 from cosim.runtime import Runtime
 from cosim.signals import check_time_grid
 from subsims.integrator.model import gauss_nodes
@@ -96,7 +97,7 @@ def serve_timed(endpoint: str, run: str, name: str) -> int:
     """
     import json
 
-    import cosim.protocol.server as server
+    import cosim.protocol.transport.server as server
     from cosim.process import main as serve_model
 
     untimed = server.answer

@@ -1,7 +1,8 @@
 """cosim: recursive-feedback co-simulation of stand-alone subsim processes over Eclipse Zenoh."""
 
+from cosim.purity import ImpureModel, check_pure
 from cosim.signals import Segment
 from cosim.subsim import ModelError, Port, Subsim
 
-__all__ = ["ModelError", "Port", "Segment", "Subsim"]
+__all__ = ["ImpureModel", "ModelError", "Port", "Segment", "Subsim", "check_pure"]
 __version__ = "0.1.0"

@@ -8,7 +8,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from cosim.contract import SubsimError
-from cosim.coupler.relaxation import METHODS, Coordinator, NotConverged
+from cosim.coupler.relaxation import METHODS, NotConverged
 from cosim.runner import open_session, run_scenario
 from cosim.scenario import ScenarioError, load
 
@@ -79,11 +79,11 @@ def _describe(args: argparse.Namespace) -> int:
                    f"first guess {st.first_guess}, interp {st.interp}"
             print(line)
             if method == "distributed":
-                co = Coordinator(session.handles, scenario.couplings, st, session.descriptions)
+                plan = session.plans[method]
                 given = "given" if st.order is not None else "derived"
-                print(f"  order ({given}): {' -> '.join(co.order)}")
-                print(f"  feedback edges ({co.feedback_signals} scalar signals): "
-                      f"{'; '.join(map(str, co.feedback)) or 'none'}")
+                print(f"  order ({given}): {' -> '.join(plan.order)}")
+                print(f"  feedback edges ({plan.feedback_signals} scalar signals): "
+                      f"{'; '.join(map(str, plan.feedback)) or 'none'}")
     finally:
         session.close()
     return 0

@@ -14,8 +14,9 @@ from dataclasses import dataclass, field
 import zenoh
 
 from cosim.contract import SubsimError
-from cosim.handles import RemoteHandle
-from cosim.protocol.bus import coordinator_alive_key, new_run_id, open_router
+from cosim.protocol.keys import coordinator_alive_key, new_run_id
+from cosim.protocol.transport.client import RemoteHandle
+from cosim.protocol.transport.session import open_router
 
 
 def subsim_command(

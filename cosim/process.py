@@ -18,8 +18,9 @@ from collections.abc import Sequence
 
 import zenoh
 
-from cosim.protocol.bus import check_name, client_config
-from cosim.protocol.server import CommandServer
+from cosim.protocol.keys import check_name
+from cosim.protocol.transport.server import CommandServer
+from cosim.protocol.transport.session import client_config
 from cosim.runtime import DEFAULT_HISTORY, Runtime
 from cosim.subsim import Subsim
 

@@ -1,6 +1,6 @@
 """Run a scenario: open the bus, launch or attach subsims, configure, couple, write results.
 
-The I/O shell around the sans-IO :class:`~cosim.coupler.relaxation.Coordinator`.
+The I/O shell around the coupler: scenario in, processes up, :class:`~cosim.driver.Coordinator` over them, results out.
 """
 
 from __future__ import annotations
@@ -11,8 +11,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from cosim.contract import SubsimError
-from cosim.coupler.couplings import SignalRef, check_couplings
-from cosim.coupler.relaxation import Coordinator, Interval, RunSummary
+from cosim.coupler.couplings import CouplingError, SignalRef
+from cosim.coupler.plan import Plan
+from cosim.coupler.relaxation import Interval, RunSummary
+from cosim.driver import Coordinator, plan_for
 from cosim.handles import Description, InProcessHandle, SubsimHandle
 from cosim.launch import Bus, subsim_command
 from cosim.progress import Progress
@@ -45,6 +47,7 @@ class Session:
     handles: dict[str, SubsimHandle]
     descriptions: dict[str, Description]
     bus: Bus | None = None
+    plans: dict[str, Plan] = field(default_factory=dict)  # per method, checked once
 
     def close(self) -> None:
         for h in self.handles.values():
@@ -89,13 +92,7 @@ def open_session(
                 session.descriptions[name] = handles[name].configure(spec.params, t0=scenario.start)
             except SubsimError as exc:
                 raise ScenarioError(f"{scenario.path}: [subsims.{name}.params] {exc.message}") from None
-        inputs = {n: d.inputs for n, d in session.descriptions.items()}
-        outputs = {n: d.outputs for n, d in session.descriptions.items()}
-        for i in range(len(scenario.couplings)):  # one at a time, so the error names the first bad key
-            try:
-                check_couplings(scenario.couplings[: i + 1], inputs, outputs)
-            except ValueError as exc:
-                raise ScenarioError(f"{scenario.path}: [couplings[{i}]] {exc}") from None
+        session.plans = {method: build_plan(scenario, session.descriptions, method) for method in scenario.settings}
         signals = {f"{n}.{p}" for n, d in session.descriptions.items() for p in [*d.inputs, *d.outputs]}
         for name in scenario.settings_for().tolerances:
             if name not in signals:
@@ -106,6 +103,14 @@ def open_session(
         session.close()
         raise
     return session
+
+
+def build_plan(scenario: Scenario, descriptions: dict[str, Description], method: str) -> Plan:
+    """The couplings checked against the described ports, once; errors name the scenario key."""
+    try:
+        return plan_for(descriptions, scenario.couplings, scenario.settings_for(method))
+    except CouplingError as exc:
+        raise ScenarioError(f"{scenario.path}: [couplings[{exc.index}]] {exc}") from None
 
 
 def output_signals(scenario: Scenario, descriptions: dict[str, Description]) -> list[tuple[SignalRef, int]]:
@@ -143,7 +148,7 @@ def run_scenario(
     output = output or default_output(scenario, method)
     session = open_session(scenario, inprocess=inprocess, listen=listen, log=log)
     try:
-        coordinator = Coordinator(session.handles, scenario.couplings, settings, session.descriptions)
+        coordinator = Coordinator(session.handles, session.plans[method], settings)
         writer = ResultWriter(output, output_signals(scenario, session.descriptions))
         bar = Progress(scenario.start, stop, enabled=progress)
 

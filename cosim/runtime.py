@@ -280,35 +280,45 @@ class Runtime:
 
     def _input_function(
         self, times: np.ndarray, inputs: Mapping[str, Any], interp: str
-    ) -> Callable[[float], dict[str, np.ndarray]]:
+    ) -> Callable[[float | np.ndarray], dict[str, np.ndarray]]:
         if not isinstance(inputs, Mapping):
             raise CosimError("bad_value", "inputs must be a map of input name -> samples")
-        missing = [k for k in self.inputs if k not in inputs]
-        unknown = [k for k in inputs if k not in self.inputs]
-        if missing or unknown:
-            parts = [f"missing {missing}" if missing else "", f"unknown {unknown}" if unknown else ""]
-            known = ", ".join(f"{k}({p.size})" for k, p in self.inputs.items()) or "none"
-            raise CosimError("bad_value", f"inputs: {'; '.join(p for p in parts if p)}; this subsim takes: {known}")
+        if inputs.keys() != self.inputs.keys():
+            self._wrong_input_names(inputs)
         if not self.inputs:
             return lambda t: {}
         columns, slices, start = [], {}, 0
         for name, port in self.inputs.items():
-            try:
-                v = np.asarray(inputs[name], dtype=np.float64)
-            except (TypeError, ValueError):
-                raise CosimError("bad_value", f"inputs.{name}: not a float array") from None
+            v = inputs[name]
+            if type(v) is not np.ndarray or v.dtype != np.float64:
+                try:
+                    v = np.asarray(v, dtype=np.float64)
+                except (TypeError, ValueError):
+                    raise CosimError("bad_value", f"inputs.{name}: not a float array") from None
             if v.shape != (times.size, port.size):
                 raise CosimError(
                     "bad_value", f"inputs.{name}: expected shape ({times.size}, {port.size}), got {v.shape}"
                 )
-            if not np.isfinite(v).all():
-                raise CosimError("bad_value", f"inputs.{name}: contains NaN or inf")
             columns.append(v)
             slices[name] = slice(start, start + port.size)
             start += port.size
-        at = interpolant(times, np.hstack(columns), interp)  # times and values checked above
+        values = columns[0] if len(columns) == 1 else np.hstack(columns)
+        if not np.isfinite(values).all():  # one check for all inputs; name the first bad one
+            bad = next(n for n, c in zip(self.inputs, columns) if not np.isfinite(c).all())
+            raise CosimError("bad_value", f"inputs.{bad}: contains NaN or inf")
+        at = interpolant(times, values, interp)  # times and values checked above
+        if len(slices) == 1:
+            (only,) = slices
+            return lambda t: {only: at(t)}
         items = tuple(slices.items())
         return lambda t: (lambda x: {k: x[..., s] for k, s in items})(at(t))
+
+    def _wrong_input_names(self, inputs: Mapping[str, Any]) -> None:
+        missing = [k for k in self.inputs if k not in inputs]
+        unknown = [k for k in inputs if k not in self.inputs]
+        parts = [f"missing {missing}" if missing else "", f"unknown {unknown}" if unknown else ""]
+        known = ", ".join(f"{k}({p.size})" for k, p in self.inputs.items()) or "none"
+        raise CosimError("bad_value", f"inputs: {'; '.join(p for p in parts if p)}; this subsim takes: {known}")
 
     def _check_outputs(self, outputs: Mapping[str, Any], times: np.ndarray) -> dict[str, np.ndarray]:
         if not isinstance(outputs, Mapping):

@@ -1,8 +1,10 @@
-"""Scenario files (TOML): subsims, couplings, coupling settings, stop time and outputs.
+"""Scenario files (TOML) parsed once into a checked, immutable :class:`Scenario`.
 
 Loading checks structure, types and names; every error names the file and the offending key.
 Signals and sizes are checked against the subsims' own port declarations when the run starts
-(ports may depend on parameters), and those errors name the coupling's key too.
+(ports may depend on parameters): see :func:`cosim.runner.build_plan`, whose errors name the
+coupling's key too. Every key a scenario may hold is in :data:`KEYS` (docs/scenarios.md is
+tested against it).
 """
 
 from __future__ import annotations
@@ -11,21 +13,81 @@ import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from types import MappingProxyType
 from typing import Any
 
 from cosim.coupler.convergence import Tolerance
 from cosim.coupler.couplings import Coupling
+from cosim.coupler.order import check_order
 from cosim.coupler.relaxation import METHODS, Settings
-from cosim.importing import import_object
-from cosim.protocol.bus import check_name
+from cosim.importing import load_model
+from cosim.protocol.keys import check_name
 from cosim.subsim import Subsim
 
-SETTING_KEYS = {"method", "interval", "samples", "first_guess", "interp", "tol", "res", "max_stages", "order",
-                "max_halvings"}
-TOP_KEYS = {"name", "description", "start", "stop", "coupling", "subsims", "couplings", "tolerances", "output",
-            "unified"}
-SUBSIM_KEYS = {"model", "external", "params", "doc"}
-COUPLING_KEYS = {"to", "from", "transform", "params", "doc"}
+
+@dataclass(frozen=True)
+class Key:
+    """One scenario key: the table it sits in, its TOML type, default, unit and meaning."""
+
+    type: str
+    default: str
+    unit: str
+    meaning: str
+
+
+# table -> key -> Key. "subsims.<name>", "coupling.<method>" and "tolerances.<signal>" stand for any name.
+KEYS: dict[str, dict[str, Key]] = {
+    "": {
+        "name": Key("string", "file name without .toml", "", "scenario name; names the default result file"),
+        "description": Key("string", '""', "", "one line shown by cosim describe"),
+        "start": Key("number", "0.0", "s", "simulated start time; every subsim is configured at it"),
+        "stop": Key("number", "required", "s", "simulated stop time; whole intervals run until it is reached"),
+    },
+    "subsims.<name>": {
+        "model": Key("string", "required unless external", "",
+                     "'package.module:Class' of a cosim.Subsim; launched as its own process"),
+        "external": Key("boolean", "false", "",
+                        "true: not launched; cosim run prints the command to start it and waits for it"),
+        "params": Key("table", "{}", "", "parameters passed to the model's initial_state (the model's own keys)"),
+        "doc": Key("string", '""', "", "free text"),
+    },
+    "couplings[]": {
+        "to": Key("string", "required", "", "the input driven, 'subsim.port'"),
+        "from": Key("string or list of strings", "required", "", "the output(s) read, 'subsim.port'"),
+        "transform": Key("string", '"identity"', "",
+                         "'identity', 'gain', 'linear' or 'package.module:function' (see Transforms)"),
+        "params": Key("table", "{}", "", "keyword arguments of the transform"),
+        "doc": Key("string", '""', "", "free text"),
+    },
+    "coupling": {
+        "method": Key("string", '"centralized"', "", "default method: 'centralized' (RF-C) or 'distributed' (RF-D)"),
+        "interval": Key("number", "1.0", "s", "convergence interval length H"),
+        "samples": Key("integer", "5", "", "samples per interval, both ends included (the paper's ndp)"),
+        "first_guess": Key("string", '"extrapolate"', "", "stage-0 inputs: 'zero', 'hold' or 'extrapolate'"),
+        "interp": Key("string", '"linear"', "", "input interpolation: 'linear', 'cubic' or 'lagrange'"),
+        "tol": Key("number", "1e-10", "1", "relative convergence tolerance (of the newest stage's span)"),
+        "res": Key("number", "1e-12", "signal unit", "absolute convergence tolerance"),
+        "max_stages": Key("integer", "100", "", "stages before an interval counts as not converged"),
+        "order": Key("list of strings", "derived", "", "distributed execution order; every subsim once"),
+        "max_halvings": Key("integer", "0", "", "times a non-converging interval is retried on its first half"),
+    },
+    "coupling.<method>": {},  # the keys of [coupling] but method, for one method only
+    "tolerances.<signal>": {
+        "rel": Key("number", "0.0", "1", "relative tolerance of this signal (replaces tol)"),
+        "abs": Key("number", "0.0", "signal unit", "absolute tolerance of this signal (replaces res)"),
+    },
+    "output": {
+        "path": Key("string", '"results/<name>-<method>.csv"', "",
+                    "result file, .csv or .npz; relative to the working directory"),
+        "signals": Key("list of strings", "every output", "", "'subsim.port' outputs to write"),
+    },
+    "unified": {
+        "function": Key("string", "none", "", "'package.module:function' of the one-integrator reference (RK-U)"),
+        "params": Key("table", "{}", "", "keyword arguments of that function"),
+    },
+}
+KEYS["coupling.<method>"] = {k: v for k, v in KEYS["coupling"].items() if k != "method"}
+TABLES = {"coupling", "subsims", "couplings", "tolerances", "output", "unified"}
 
 
 class ScenarioError(ValueError):
@@ -37,10 +99,16 @@ class SubsimSpec:
     name: str
     model: str | None  # "package.module:Class"; None for an external subsim
     external: bool
-    params: dict[str, Any]
+    params: Mapping[str, Any]
 
     def model_class(self) -> type[Subsim]:
         return load_model(self.model or "")
+
+
+@dataclass(frozen=True)
+class UnifiedSpec:
+    function: str  # "package.module:function"
+    params: Mapping[str, Any]
 
 
 @dataclass(frozen=True)
@@ -50,27 +118,20 @@ class Scenario:
     description: str
     start: float
     stop: float
-    subsims: dict[str, SubsimSpec]
-    couplings: list[Coupling]
-    settings: dict[str, Settings]  # per method
+    subsims: Mapping[str, SubsimSpec]
+    couplings: tuple[Coupling, ...]
+    settings: Mapping[str, Settings]  # per method
     default_method: str
     output_path: Path | None
-    output_signals: list[str] | None
-    unified: str | None = None
-    raw: dict = field(default_factory=dict, repr=False)
+    output_signals: tuple[str, ...] | None
+    unified: UnifiedSpec | None = None
+    raw: Mapping[str, Any] = field(default_factory=dict)  # the file's tables, for variants: parse({**raw, ...})
 
     def settings_for(self, method: str | None = None) -> Settings:
         method = method or self.default_method
         if method not in self.settings:
             raise ScenarioError(f"{self.path}: method {method!r} unknown; use one of {', '.join(METHODS)}")
         return self.settings[method]
-
-
-def load_model(path: str) -> type[Subsim]:
-    cls = import_object(path, "model")
-    if not (isinstance(cls, type) and issubclass(cls, Subsim)):
-        raise ValueError(f"model {path!r} is not a cosim.Subsim subclass")
-    return cls
 
 
 def load(path: str | Path) -> Scenario:
@@ -85,130 +146,164 @@ def load(path: str | Path) -> Scenario:
 
 
 def parse(raw: Mapping[str, Any], path: Path) -> Scenario:
-    def fail(key: str, msg: str) -> ScenarioError:
-        return ScenarioError(f"{path}: [{key}] {msg}")
-
-    def unknown(table: Mapping, allowed: set[str], key: str) -> None:
-        extra = sorted(set(table) - allowed)
-        if extra:
-            raise fail(key, f"unknown key(s) {extra}; allowed: {sorted(allowed)}")
-
-    def number(table: Mapping, key: str, where: str, default: float | None = None) -> float:
-        v = table.get(key, default)
-        if isinstance(v, bool) or not isinstance(v, (int, float)):
-            raise fail(f"{where}.{key}" if where else key, f"must be a number, got {v!r}")
-        return float(v)
-
-    unknown(raw, TOP_KEYS, "top level")
-    start = number(raw, "start", "", 0.0)
-    stop = number(raw, "stop", "")
+    """Check every table of ``raw`` (a parsed scenario file) and build the scenario."""
+    p = _Parser(path)
+    p.known(raw, set(KEYS[""]) | TABLES, "top level")
+    start = p.number(raw, "start", 0.0)
+    stop = p.number(raw, "stop")
     if stop <= start:
-        raise fail("stop", f"must be after start ({start}), got {stop}")
-
-    subsims: dict[str, SubsimSpec] = {}
-    table = raw.get("subsims")
-    if not isinstance(table, dict) or not table:
-        raise fail("subsims", "at least one [subsims.<name>] table is required")
-    for name, spec in table.items():
-        key = f"subsims.{name}"
-        try:
-            check_name(name, "subsim name")
-        except ValueError as exc:
-            raise fail(key, str(exc)) from None
-        if not isinstance(spec, dict):
-            raise fail(key, "must be a table")
-        unknown(spec, SUBSIM_KEYS, key)
-        external = spec.get("external", False)
-        if not isinstance(external, bool):
-            raise fail(f"{key}.external", "must be true or false")
-        model = spec.get("model")
-        if model is None and not external:
-            raise fail(key, "needs model = 'package.module:Class' (or external = true)")
-        if model is not None:
-            try:
-                load_model(model)
-            except ValueError as exc:
-                raise fail(f"{key}.model", str(exc)) from None
-        params = spec.get("params", {})
-        if not isinstance(params, dict):
-            raise fail(f"{key}.params", "must be a table")
-        subsims[name] = SubsimSpec(name, model, external, params)
-
-    couplings = []
-    for i, c in enumerate(raw.get("couplings", [])):
-        key = f"couplings[{i}]"
-        if not isinstance(c, dict):
-            raise fail(key, "must be a table ([[couplings]])")
-        unknown(c, COUPLING_KEYS, key)
-        for req in ("to", "from"):
-            if req not in c:
-                raise fail(key, f"missing {req!r}")
-        try:
-            coupling = Coupling.make(c["to"], c["from"], c.get("transform", "identity"), c.get("params", {}))
-        except (ValueError, TypeError) as exc:
-            raise fail(key, str(exc)) from None
-        for ref in (coupling.target, *coupling.sources):
-            if ref.subsim not in subsims:
-                raise fail(key, f"unknown subsim {ref.subsim!r} in {str(ref)!r}; subsims: {sorted(subsims)}")
-        couplings.append(coupling)
-
-    tolerances = {}
-    for sig, t in raw.get("tolerances", {}).items():
-        key = f"tolerances.{sig!r}"
-        if not isinstance(t, dict) or not set(t) <= {"rel", "abs"} or not t:
-            raise fail(key, "must be a table with rel and/or abs")
-        try:
-            tolerances[sig] = Tolerance(t.get("rel", 0.0), t.get("abs", 0.0))
-        except ValueError as exc:
-            raise fail(key, str(exc)) from None
-
-    coupling_table = raw.get("coupling", {})
-    if not isinstance(coupling_table, dict):
-        raise fail("coupling", "must be a table")
-    base = {k: v for k, v in coupling_table.items() if k not in METHODS}
-    unknown(base, SETTING_KEYS, "coupling")
-    def build(table: Mapping[str, Any], method: str, where: str) -> Settings:
-        merged = dict(table)
-        try:
-            tol = Tolerance(merged.pop("tol", 1e-10), merged.pop("res", 1e-12))
-            order = merged.get("order")
-            if order is not None and sorted(order) != sorted(subsims):
-                raise ValueError(f"order {order} must list every subsim once: {sorted(subsims)}")
-            return Settings(tol=tol, tolerances=tolerances, **{**merged, "method": method})
-        except (ValueError, TypeError) as exc:
-            raise fail(where, str(exc)) from None
-
-    build(base, "centralized", "coupling")  # the shared table must be valid on its own
-    settings = {}
-    for method in METHODS:
-        over = coupling_table.get(method, {})
-        if not isinstance(over, dict):
-            raise fail(f"coupling.{method}", "must be a table")
-        unknown(over, SETTING_KEYS - {"method"}, f"coupling.{method}")
-        settings[method] = build({**base, **over}, method, f"coupling.{method}")
-    default_method = base.get("method", "centralized")
-    if default_method not in METHODS:
-        raise fail("coupling.method", f"must be one of {METHODS}, got {default_method!r}")
-
-    output = raw.get("output", {})
-    unknown(output, {"path", "signals"}, "output")
-    out_path = Path(output["path"]) if "path" in output else None
-    if out_path is not None and not out_path.is_absolute():
-        out_path = Path.cwd() / out_path
-    signals = output.get("signals")
-    if signals is not None and (not isinstance(signals, list) or not all(isinstance(s, str) for s in signals)):
-        raise fail("output.signals", "must be a list of 'subsim.port' strings")
-
-    unified_table = raw.get("unified", {})
-    if not isinstance(unified_table, dict):
-        raise fail("unified", "must be a table")
-    unknown(unified_table, {"function", "params"}, "unified")
-    unified = unified_table.get("function")
-    if unified is not None and (not isinstance(unified, str) or ":" not in unified):
-        raise fail("unified.function", f"must be 'package.module:function', got {unified!r}")
-    return Scenario(path, str(raw.get("name", path.stem)), str(raw.get("description", "")), start, stop, subsims,
-                    couplings, settings, default_method, out_path, signals, unified, dict(raw))
+        raise p.fail("stop", f"must be after start ({start}), got {stop}")
+    subsims = p.subsims(raw.get("subsims"))
+    couplings = tuple(p.coupling(i, c, subsims) for i, c in enumerate(p.list_of_tables(raw, "couplings")))
+    settings, default_method = p.settings(p.table(raw, "coupling"), p.tolerances(p.table(raw, "tolerances")), subsims)
+    out_path, signals = p.output(p.table(raw, "output"))
+    return Scenario(path, str(raw.get("name", path.stem)), str(raw.get("description", "")), start, stop,
+                    MappingProxyType(subsims), couplings, MappingProxyType(settings), default_method, out_path,
+                    signals, p.unified(p.table(raw, "unified")), MappingProxyType(dict(raw)))
 
 
 def with_method(s: Scenario, method: str) -> Scenario:
     return replace(s, default_method=method)
+
+
+class _Parser:
+    """The checks of one file; each method checks one table and names its key in every error."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+
+    def fail(self, key: str, msg: str) -> ScenarioError:
+        return ScenarioError(f"{self.path}: [{key}] {msg}")
+
+    def known(self, table: Mapping, allowed: set[str], key: str) -> None:
+        extra = sorted(set(table) - allowed)
+        if extra:
+            raise self.fail(key, f"unknown key(s) {extra}; allowed: {sorted(allowed)}")
+
+    def number(self, table: Mapping, key: str, default: float | None = None, where: str = "") -> float:
+        v = table.get(key, default)
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise self.fail(f"{where}.{key}" if where else key, f"must be a number, got {v!r}")
+        return float(v)
+
+    def table(self, raw: Mapping, key: str, where: str | None = None) -> Mapping[str, Any]:
+        value = raw.get(key, {})
+        if not isinstance(value, dict):
+            raise self.fail(where or key, "must be a table")
+        return value
+
+    def list_of_tables(self, raw: Mapping, key: str) -> list[Mapping[str, Any]]:
+        value = raw.get(key, [])
+        if not isinstance(value, list):
+            raise self.fail(key, f"must be a list of tables ([[{key}]])")
+        for i, item in enumerate(value):
+            if not isinstance(item, dict):
+                raise self.fail(f"{key}[{i}]", f"must be a table ([[{key}]])")
+        return value
+
+    def subsims(self, table: Any) -> dict[str, SubsimSpec]:
+        if not isinstance(table, dict) or not table:
+            raise self.fail("subsims", "at least one [subsims.<name>] table is required")
+        return {name: self.subsim(name, spec) for name, spec in table.items()}
+
+    def subsim(self, name: str, spec: Any) -> SubsimSpec:
+        key = f"subsims.{name}"
+        try:
+            check_name(name, "subsim name")
+        except ValueError as exc:
+            raise self.fail(key, str(exc)) from None
+        if not isinstance(spec, dict):
+            raise self.fail(key, "must be a table")
+        self.known(spec, set(KEYS["subsims.<name>"]), key)
+        external = spec.get("external", False)
+        if not isinstance(external, bool):
+            raise self.fail(f"{key}.external", "must be true or false")
+        model = spec.get("model")
+        if model is None and not external:
+            raise self.fail(key, "needs model = 'package.module:Class' (or external = true)")
+        if model is not None:
+            try:
+                load_model(model)
+            except ValueError as exc:
+                raise self.fail(f"{key}.model", str(exc)) from None
+        params = self.table(spec, "params", f"{key}.params")
+        return SubsimSpec(name, model, external, MappingProxyType(dict(params)))
+
+    def coupling(self, i: int, c: Mapping[str, Any], subsims: Mapping[str, SubsimSpec]) -> Coupling:
+        key = f"couplings[{i}]"
+        self.known(c, set(KEYS["couplings[]"]), key)
+        for required in ("to", "from"):
+            if required not in c:
+                raise self.fail(key, f"missing {required!r}")
+        try:
+            coupling = Coupling.make(c["to"], c["from"], c.get("transform", "identity"), c.get("params", {}))
+        except (ValueError, TypeError) as exc:
+            raise self.fail(key, str(exc)) from None
+        for ref in (coupling.target, *coupling.sources):
+            if ref.subsim not in subsims:
+                raise self.fail(key, f"unknown subsim {ref.subsim!r} in {str(ref)!r}; subsims: {sorted(subsims)}")
+        return coupling
+
+    def tolerances(self, table: Mapping[str, Any]) -> dict[str, Tolerance]:
+        out = {}
+        for signal, t in table.items():
+            key = f"tolerances.{signal!r}"
+            if not isinstance(t, dict) or not t:
+                raise self.fail(key, "must be a table with rel and/or abs")
+            self.known(t, set(KEYS["tolerances.<signal>"]), key)
+            try:
+                out[signal] = Tolerance(t.get("rel", 0.0), t.get("abs", 0.0))
+            except ValueError as exc:
+                raise self.fail(key, str(exc)) from None
+        return out
+
+    def settings(
+        self, table: Mapping[str, Any], tolerances: Mapping[str, Tolerance], subsims: Mapping[str, SubsimSpec]
+    ) -> tuple[dict[str, Settings], str]:
+        """Per method: [coupling] overridden by [coupling.<method>]; and the default method."""
+        base = {k: v for k, v in table.items() if k not in METHODS}
+        self.known(base, set(KEYS["coupling"]), "coupling")
+        default_method = base.get("method", "centralized")
+        if default_method not in METHODS:
+            raise self.fail("coupling.method", f"must be one of {METHODS}, got {default_method!r}")
+        self.method_settings(base, "centralized", tolerances, subsims, "coupling")  # valid on its own
+        settings = {}
+        for method in METHODS:
+            over = self.table(table, method, f"coupling.{method}")
+            self.known(over, set(KEYS["coupling.<method>"]), f"coupling.{method}")
+            settings[method] = self.method_settings({**base, **over}, method, tolerances, subsims, f"coupling.{method}")
+        return settings, default_method
+
+    def method_settings(
+        self, table: Mapping[str, Any], method: str, tolerances: Mapping[str, Tolerance],
+        subsims: Mapping[str, SubsimSpec], where: str,
+    ) -> Settings:
+        merged = dict(table)
+        try:
+            tol = Tolerance(merged.pop("tol", 1e-10), merged.pop("res", 1e-12))
+            order = merged.get("order")
+            if order is not None:
+                merged["order"] = check_order(order, list(subsims))
+            return Settings(tol=tol, tolerances=MappingProxyType(dict(tolerances)), **{**merged, "method": method})
+        except (ValueError, TypeError) as exc:
+            raise self.fail(where, str(exc)) from None
+
+    def output(self, table: Mapping[str, Any]) -> tuple[Path | None, tuple[str, ...] | None]:
+        self.known(table, set(KEYS["output"]), "output")
+        out_path = Path(table["path"]) if "path" in table else None
+        if out_path is not None and not out_path.is_absolute():
+            out_path = Path.cwd() / out_path
+        signals = table.get("signals")
+        if signals is not None and (not isinstance(signals, list) or not all(isinstance(s, str) for s in signals)):
+            raise self.fail("output.signals", "must be a list of 'subsim.port' strings")
+        return out_path, tuple(signals) if signals is not None else None
+
+    def unified(self, table: Mapping[str, Any]) -> UnifiedSpec | None:
+        self.known(table, set(KEYS["unified"]), "unified")
+        function = table.get("function")
+        if function is None:
+            return None
+        if not isinstance(function, str) or ":" not in function:
+            raise self.fail("unified.function", f"must be 'package.module:function', got {function!r}")
+        params = self.table(table, "params", "unified.params")
+        return UnifiedSpec(function, MappingProxyType(dict(params)))

@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import sys
 
+from cosim.importing import load_model
 from cosim.process import main as serve_model
-from cosim.scenario import load_model
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -17,8 +17,8 @@ from collections.abc import Callable, Iterator
 
 import pytest
 
-from cosim.handles import RemoteHandle
 from cosim.launch import Bus
+from cosim.protocol.transport.client import RemoteHandle
 
 
 @pytest.fixture

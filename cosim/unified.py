@@ -29,7 +29,7 @@ from cosim.scenario import Scenario, ScenarioError
 
 
 def resolve_function(scenario: Scenario) -> Any:
-    name = scenario.unified
+    name = scenario.unified.function if scenario.unified else None
     if not name:
         raise ScenarioError(f"{scenario.path}: no [unified] function: this scenario has no unified reference")
     try:
@@ -44,10 +44,7 @@ def resolve_function(scenario: Scenario) -> Any:
 def run_unified(scenario: Scenario, stop: float | None = None, output: Path | None = None) -> RunReport:
     """Run the scenario's unified reference and write it like a coupled run. Raises ScenarioError."""
     fn = resolve_function(scenario)
-    table = scenario.raw.get("unified", {})
-    extra = table.get("params", {}) if isinstance(table, dict) else {}
-    if not isinstance(extra, dict):
-        raise ScenarioError(f"{scenario.path}: [unified.params] must be a table")
+    extra = dict(scenario.unified.params)
     settings = scenario.settings_for()
     stop = scenario.stop if stop is None else float(stop)
     output = Path(output) if output is not None else default_output(scenario, "unified")
@@ -56,7 +53,7 @@ def run_unified(scenario: Scenario, stop: float | None = None, output: Path | No
     start = scenario.start
     n_int = max(1, math.ceil((stop - start) / H - 1e-9))  # whole intervals past stop, as Coordinator.run
     n_steps = n_int * (m - 1)
-    couplings = [dict(c) for c in scenario.raw.get("couplings", [])]
+    couplings = [c.as_table() for c in scenario.couplings]
     params = {name: dict(spec.params) for name, spec in scenario.subsims.items()}
 
     session = open_session(scenario, inprocess=True)  # the coupled run's output ports and sizes
@@ -70,7 +67,7 @@ def run_unified(scenario: Scenario, stop: float | None = None, output: Path | No
         # stop half a step short of the last sample: the function rounds up to whole steps
         result = fn(params, stop=start + (n_steps - 0.5) * dt, dt=dt, start=start, couplings=couplings, **extra)
     except (ValueError, TypeError, KeyError) as exc:
-        raise ScenarioError(f"{scenario.path}: [unified.function] {scenario.unified}: {exc}") from None
+        raise ScenarioError(f"{scenario.path}: [unified.function] {scenario.unified.function}: {exc}") from None
     wall = time.perf_counter() - started
 
     columns: dict[str, np.ndarray] = {}
@@ -78,7 +75,7 @@ def run_unified(scenario: Scenario, stop: float | None = None, output: Path | No
         try:
             v = np.asarray(result[ref.subsim][ref.port], dtype=np.float64)
         except (KeyError, TypeError):
-            raise ScenarioError(f"{scenario.path}: [unified.function] {scenario.unified} returned no "
+            raise ScenarioError(f"{scenario.path}: [unified.function] {scenario.unified.function} returned no "
                                 f"{ref} (the coupled run writes it)") from None
         v = v.reshape(v.shape[0], -1) if v.ndim else v
         if v.shape != (n_steps + 1, size):
@@ -105,4 +102,4 @@ def run_unified(scenario: Scenario, stop: float | None = None, output: Path | No
         writer.close()
     summary.wall_time = wall
     return RunReport("unified", summary, output, diag_path(output), list(scenario.subsims), [],
-                     {"dt": dt, "function": scenario.unified})
+                     {"dt": dt, "function": scenario.unified.function})

@@ -9,7 +9,8 @@ import pytest
 
 from cosim.coupler.convergence import Tolerance
 from cosim.coupler.couplings import Coupling
-from cosim.coupler.relaxation import Coordinator, Settings
+from cosim.coupler.relaxation import Settings
+from cosim.driver import Coordinator
 from cosim.handles import InProcessHandle
 from subsims.double_integrator.subsim import DoubleIntegrator
 from subsims.integrator.subsim import Integrator

@@ -8,9 +8,11 @@ import numpy as np
 import pytest
 
 from cosim.coupler.convergence import Tolerance, check, convrg
-from cosim.coupler.couplings import Coupling, SignalRef, derive_order, feedback_weight
+from cosim.coupler.couplings import Coupling, SignalRef
 from cosim.coupler.first_guess import first_guess
-from cosim.coupler.relaxation import Coordinator, Settings
+from cosim.coupler.order import derive_order, feedback_weight
+from cosim.coupler.relaxation import Settings
+from cosim.driver import Coordinator
 from cosim.handles import InProcessHandle
 from subsims.integrator.subsim import Integrator
 

@@ -54,7 +54,7 @@ from cosim.protocol.messages import (
     encode_request,
     encode_result,
 )
-from cosim.protocol.server import answer
+from cosim.protocol.service import answer
 from cosim.protocol.wire import (
     MAX_NDIM,
     MAX_NESTING,

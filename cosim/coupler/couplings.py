@@ -2,14 +2,12 @@
 
 from __future__ import annotations
 
-import itertools
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from cosim.subsim import Port
 from cosim.transforms import Transform, identity, resolve
 
 Signals = Mapping[str, Mapping[str, np.ndarray]]  # subsim -> port -> samples (n, size)
@@ -69,37 +67,58 @@ class Coupling:
             raise ValueError(f"coupling {self}: transform {self.transform_name!r} produced NaN or inf")
         return value
 
+    def as_table(self) -> dict[str, Any]:
+        """The coupling as a scenario's ``[[couplings]]`` table."""
+        return {"to": str(self.target), "from": [str(s) for s in self.sources], "transform": self.transform_name,
+                "params": dict(self.params)}
+
     def __str__(self) -> str:
         return f"{', '.join(map(str, self.sources))} -> {self.target}"
 
 
-def check_couplings(
-    couplings: Sequence[Coupling], inputs: Mapping[str, Mapping[str, Port]], outputs: Mapping[str, Mapping[str, Port]]
-) -> None:
+Ports = Mapping[str, Mapping[str, int]]  # subsim -> port -> width
+
+
+class CouplingError(ValueError):
+    """A coupling does not fit the subsims' ports; ``index`` is its position in the list."""
+
+    def __init__(self, index: int, message: str) -> None:
+        super().__init__(message)
+        self.index = index
+
+
+def check_couplings(couplings: Sequence[Coupling], inputs: Ports, outputs: Ports) -> None:
     """Every source is an existing output, every target an existing input driven at most once,
-    and an identity coupling joins signals of equal size. Raises ValueError naming the coupling."""
+    and an identity coupling joins signals of equal size. Raises CouplingError naming the coupling."""
     driven: dict[SignalRef, Coupling] = {}
-    for c in couplings:
-        if c.target.subsim not in inputs:
-            raise ValueError(f"coupling {c}: unknown subsim {c.target.subsim!r}")
-        if c.target.port not in inputs[c.target.subsim]:
-            known = ", ".join(inputs[c.target.subsim]) or "none"
-            raise ValueError(f"coupling {c}: {c.target.subsim!r} has no input {c.target.port!r} (inputs: {known})")
-        for s in c.sources:
-            if s.subsim not in outputs:
-                raise ValueError(f"coupling {c}: unknown subsim {s.subsim!r}")
-            if s.port not in outputs[s.subsim]:
-                known = ", ".join(outputs[s.subsim]) or "none"
-                raise ValueError(f"coupling {c}: {s.subsim!r} has no output {s.port!r} (outputs: {known})")
-        if c.target in driven:
-            raise ValueError(f"input {c.target} is driven twice: by {driven[c.target]} and by {c}")
-        driven[c.target] = c
-        if c.transform is identity:
-            if len(c.sources) != 1:
-                raise ValueError(f"coupling {c}: several sources need a transform")
-            src, dst = outputs[c.sources[0].subsim][c.sources[0].port], inputs[c.target.subsim][c.target.port]
-            if src.size != dst.size:
-                raise ValueError(f"coupling {c}: size mismatch, output has {src.size}, input takes {dst.size}")
+    for i, c in enumerate(couplings):
+        try:
+            _check_one(c, inputs, outputs, driven)
+        except ValueError as exc:
+            raise CouplingError(i, str(exc)) from None
+
+
+def _check_one(c: Coupling, inputs: Ports, outputs: Ports, driven: dict[SignalRef, Coupling]) -> None:
+    if c.target.subsim not in inputs:
+        raise ValueError(f"coupling {c}: unknown subsim {c.target.subsim!r}")
+    if c.target.port not in inputs[c.target.subsim]:
+        known = ", ".join(inputs[c.target.subsim]) or "none"
+        raise ValueError(f"coupling {c}: {c.target.subsim!r} has no input {c.target.port!r} (inputs: {known})")
+    for s in c.sources:
+        if s.subsim not in outputs:
+            raise ValueError(f"coupling {c}: unknown subsim {s.subsim!r}")
+        if s.port not in outputs[s.subsim]:
+            known = ", ".join(outputs[s.subsim]) or "none"
+            raise ValueError(f"coupling {c}: {s.subsim!r} has no output {s.port!r} (outputs: {known})")
+    if c.target in driven:
+        raise ValueError(f"input {c.target} is driven twice: by {driven[c.target]} and by {c}")
+    driven[c.target] = c
+    if c.transform is identity:
+        if len(c.sources) != 1:
+            raise ValueError(f"coupling {c}: several sources need a transform")
+        src, dst = outputs[c.sources[0].subsim][c.sources[0].port], inputs[c.target.subsim][c.target.port]
+        if src != dst:
+            raise ValueError(f"coupling {c}: size mismatch, output has {src}, input takes {dst}")
 
 
 def feedback_weight(order: Sequence[str], couplings: Sequence[Coupling], sizes: Mapping[SignalRef, int]) -> int:
@@ -111,22 +130,3 @@ def feedback_weight(order: Sequence[str], couplings: Sequence[Coupling], sizes: 
 def is_feedback(c: Coupling, rank: Mapping[str, int]) -> bool:
     """A coupling runs backwards when some source runs at or after its target."""
     return any(rank[s.subsim] >= rank[c.target.subsim] for s in c.sources)
-
-
-def derive_order(names: Sequence[str], couplings: Sequence[Coupling], sizes: Mapping[SignalRef, int]) -> list[str]:
-    """The execution order with the fewest feedback signals (ties: closest to the declared order).
-
-    Exhaustive for up to 8 subsims; beyond that, a greedy order (sources first) improved by swaps.
-    """
-    if len(names) <= 8:
-        return list(min(itertools.permutations(names), key=lambda p: feedback_weight(p, couplings, sizes)))
-    order = list(names)
-    improved = True
-    while improved:
-        improved = False
-        for i, j in itertools.combinations(range(len(order)), 2):
-            trial = order.copy()
-            trial[i], trial[j] = trial[j], trial[i]
-            if feedback_weight(trial, couplings, sizes) < feedback_weight(order, couplings, sizes):
-                order, improved = trial, True
-    return order

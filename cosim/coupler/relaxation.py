@@ -1,30 +1,42 @@
-"""Recursive feedback (waveform relaxation) over one convergence interval, sans-IO.
+"""Recursive feedback (waveform relaxation), sans-IO: a state machine that says what to run next.
 
 Centralized (RF-C, Jacobi, spec §4): every stage runs all subsims concurrently on inputs made
 from the previous stage's outputs; the check compares all outputs of successive stages.
 Distributed (RF-D, Gauss-Seidel, spec §5): subsims run in order; forward couplings use the
 current stage's outputs at once; only the feedback couplings (sources at or after the target
 in the order) are iterated, and only they are checked.
-
 Both check from stage 1 on, as the paper's listings do (stage 0 runs on the first guess).
+
+The machine does no I/O and reads no clock. It emits actions and takes results (the h11 pattern)::
+
+    steps = Relaxation(plan, settings).run(0.0, 10.0)
+    action = steps.send(None)
+    while not isinstance(action, Done):
+        if isinstance(action, Run):       # run these subsims on these inputs; answer their outputs
+            action = steps.send({name: run(name, action.times, ins) for name, ins in action.inputs.items()})
+        else:                             # Rollback: discard every trial; Commit: commit and record
+            action = steps.send(None)
+
+A driver (``cosim.driver``) performs the actions over in-process or remote handles.
 """
 
 from __future__ import annotations
 
-import time
 from collections import Counter
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Generator, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from cosim.coupler.convergence import Check, Tolerance, check
-from cosim.coupler.couplings import Coupling, SignalRef, check_couplings, derive_order, feedback_weight, is_feedback
+from cosim.coupler.couplings import Coupling
 from cosim.coupler.first_guess import POLICIES, first_guess
-from cosim.handles import Description, IntervalResult, SubsimHandle
+from cosim.coupler.plan import Plan
 from cosim.signals import SCHEMES
 
 METHODS = ("centralized", "distributed")
+
+Outputs = dict[str, dict[str, np.ndarray]]  # subsim -> port -> samples (n, size)
 
 
 @dataclass(frozen=True)
@@ -62,11 +74,11 @@ class Interval:
     """One converged (committed) interval, as handed to the output writer."""
 
     t: np.ndarray
-    outputs: dict[str, dict[str, np.ndarray]]  # subsim -> port -> (n, size)
+    outputs: Outputs
     inputs: dict[str, np.ndarray]  # "subsim.port" -> (n, size), as used by the last stage
     stages: int
     residuals: dict[str, list[float]]  # checked signal -> largest residual per checked stage
-    wall_time: float = 0.0
+    wall_time: float = 0.0  # set by the driver (the machine reads no clock)
     halvings: int = 0
 
     @property
@@ -101,140 +113,127 @@ class NotConverged(RuntimeError):
         self.t0, self.t1, self.stages, self.failing, self.residuals = t0, t1, stages, failing, residuals
 
 
-class Coordinator:
-    """Couples subsims through handles only; the same object drives in-process and remote runs."""
+# --- actions ----------------------------------------------------------------------------------
 
-    def __init__(
-        self,
-        handles: Mapping[str, SubsimHandle],
-        couplings: Sequence[Coupling],
-        settings: Settings,
-        descriptions: Mapping[str, Description] | None = None,
-        on_stage: Callable[[int, dict[str, dict[str, np.ndarray]]], None] | None = None,
-    ) -> None:
-        """``on_stage(stage, outputs)`` sees every stage's outputs (diagnostics, the exact tests)."""
-        self.on_stage = on_stage
-        self.handles = dict(handles)
-        self.couplings = list(couplings)
-        self.settings = settings
-        desc = dict(descriptions) if descriptions else {n: h.describe() for n, h in self.handles.items()}
-        self.inputs = {n: d.inputs for n, d in desc.items()}
-        self.outputs = {n: d.outputs for n, d in desc.items()}
-        check_couplings(self.couplings, self.inputs, self.outputs)
-        self.sizes = {SignalRef(s, p): port.size for s, ports in self.inputs.items() for p, port in ports.items()}
-        names = list(self.handles)
-        if settings.order is not None:
-            if sorted(settings.order) != sorted(names):
-                raise ValueError(f"order {list(settings.order)} must name every subsim exactly once: {names}")
-            self.order = list(settings.order)
-        else:
-            self.order = derive_order(names, self.couplings, self.sizes) if settings.method == "distributed" else names
-        rank = {n: i for i, n in enumerate(self.order)}
-        self.feedback = [c for c in self.couplings if is_feedback(c, rank)]
-        self.forward = [c for c in self.couplings if not is_feedback(c, rank)]
-        self.feedback_signals = feedback_weight(self.order, self.couplings, self.sizes)
-        self._previous: dict[str, tuple[np.ndarray, np.ndarray]] = {}
-        # converged subsims whose commit has not been sent: it rides on their next run_interval
-        self._uncommitted: set[str] = set()
 
-    # --- a run --------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Run:
+    """Run each subsim in ``inputs`` over ``times`` from its committed state (concurrently when there are
+    several); send back ``{subsim: {output port: (n, size)}}`` for exactly these subsims."""
 
-    def run(
-        self, t_start: float, t_stop: float, on_interval: Callable[[Interval], None] | None = None
-    ) -> RunSummary:
-        """Advance whole intervals from ``t_start`` (every subsim's committed time) past ``t_stop``.
+    stage: int
+    times: np.ndarray
+    inputs: dict[str, dict[str, np.ndarray]]  # subsim -> input port -> (n, size)
 
-        Interval ends sit on the grid ``t_start + k H`` (no drift over long runs) unless a
-        halving moved the start off it.
-        """
+
+@dataclass(frozen=True)
+class StageDone:
+    """A whole stage has run (emitted only with ``report_stages``): every subsim's outputs of that stage."""
+
+    stage: int
+    outputs: Outputs
+
+
+@dataclass(frozen=True)
+class Rollback:
+    """The interval ``[t0, t1]`` did not converge: discard every subsim's trial (it is retried shorter)."""
+
+    t0: float
+    t1: float
+
+
+@dataclass(frozen=True)
+class Commit:
+    """The interval converged: commit every subsim's latest trial and record ``interval``."""
+
+    interval: Interval
+
+
+@dataclass(frozen=True)
+class Done:
+    summary: RunSummary
+
+
+Action = Run | StageDone | Rollback | Commit | Done
+Steps = Generator[Action, Outputs | None, RunSummary | None]
+
+
+def sample_times(t0: float, t1: float, samples: int) -> np.ndarray:
+    """``samples`` equally spaced times from ``t0`` to ``t1``, both ends exact."""
+    t = t0 + (t1 - t0) * (np.arange(samples) / (samples - 1))
+    t[0], t[-1] = t0, t1
+    return t
+
+
+def interval_end(t_start: float, t: float, H: float) -> float:
+    """The end of the interval starting at ``t``: on the grid ``t_start + k H`` (no drift over long runs)
+    unless a halving moved ``t`` off it."""
+    k = round((t - t_start) / H)
+    return t_start + (k + 1) * H if t_start + k * H == t else t + H
+
+
+class Relaxation:
+    """The coupling algorithm for one plan and one set of settings (see the module docstring)."""
+
+    def __init__(self, plan: Plan, settings: Settings, report_stages: bool = False) -> None:
+        self.plan, self.settings, self.report_stages = plan, settings, report_stages
+        # per subsim, its input ports as (port, "subsim.port", width), built once
+        self._ports = {n: [(p, f"{n}.{p}", w) for p, w in plan.inputs[n].items()] for n in plan.names}
+        self._sizes = plan.sizes
+        self._previous: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # converged inputs of the last interval
+
+    # --- the action streams -----------------------------------------------------------------------
+
+    def run(self, t_start: float, t_stop: float) -> Steps:
+        """Whole intervals from ``t_start`` (every subsim's committed time) past ``t_stop``; returns the summary."""
+        return self._run(t_start, t_stop)
+
+    def interval(self, t0: float, t1: float) -> Steps:
+        """One interval ``[t0, t1]`` (shortened by halvings when allowed), ending in one ``Commit``."""
+        return self._interval(t0, t1)
+
+    def _run(self, t_start: float, t_stop: float) -> Generator[Action, Outputs | None, RunSummary]:
         H = self.settings.interval
         summary = RunSummary(t_start)
         t = t_start
         while t < t_stop - 1e-9 * H:
-            k = round((t - t_start) / H)
-            t1 = t_start + (k + 1) * H if t_start + k * H == t else t + H
-            interval = self._advance(t, t1)
+            interval = yield from self._interval(t, interval_end(t_start, t, H))
             summary.add(interval)
-            if on_interval is not None:
-                on_interval(interval)
             t = float(interval.t[-1])
-        self.commit_pending()
+        yield Done(summary)
         return summary
 
-    # --- one interval -------------------------------------------------------------------------
-
-    def sample_times(self, t0: float, t1: float) -> np.ndarray:
-        n = self.settings.samples
-        t = t0 + (t1 - t0) * (np.arange(n) / (n - 1))
-        t[0], t[-1] = t0, t1
-        return t
-
-    def advance(self, t0: float, t1: float) -> Interval:
-        """Converge the interval [t0, t1], commit every subsim, and return what converged.
-
-        With ``max_halvings`` > 0 a non-converging interval is retried on its first half, then
-        its first quarter, ...; the returned interval then ends before ``t1``.
-        """
-        interval = self._advance(t0, t1)
-        self.commit_pending()
-        return interval
-
-    def commit_pending(self) -> None:
-        """Commit, in one concurrent round trip, the converged trials still waiting for a next interval."""
-        names = [n for n in self.handles if n in self._uncommitted]
-        for wait in [self.handles[n].start_commit() for n in names]:
-            wait()
-        self._uncommitted.clear()
-
-    def _advance(self, t0: float, t1: float) -> Interval:
-        """:meth:`advance`, but each subsim's commit rides on its first request of the next interval."""
-        started = time.perf_counter()
-        for halvings in range(self.settings.max_halvings + 1):
-            times = self.sample_times(t0, t0 + (t1 - t0) / 2**halvings)
+    def _interval(self, t0: float, t1: float) -> Generator[Action, Outputs | None, Interval]:
+        s = self.settings
+        for halvings in range(s.max_halvings + 1):
+            times = sample_times(t0, t0 + (t1 - t0) / 2**halvings, s.samples)
             try:
-                interval = self._converge(times)
+                if s.method == "centralized":
+                    interval = yield from self._centralized(times)
+                else:
+                    interval = yield from self._distributed(times)
                 break
             except NotConverged:
-                for h in self.handles.values():
-                    h.rollback()
-                if halvings == self.settings.max_halvings:
+                yield Rollback(float(times[0]), float(times[-1]))
+                if halvings == s.max_halvings:
                     raise
-        self._uncommitted = set(self.handles)
+        interval.halvings = halvings
         self._previous = {k: (interval.t, v) for k, v in interval.inputs.items()}
-        interval.wall_time, interval.halvings = time.perf_counter() - started, halvings
+        yield Commit(interval)
         return interval
 
-    def _converge(self, times: np.ndarray) -> Interval:
-        if self.settings.method == "centralized":
-            return self._centralized(times)
-        return self._distributed(times)
-
-    def _collect(self, pending: Mapping[str, Callable[[], IntervalResult]]) -> dict[str, dict[str, np.ndarray]]:
-        """Wait for every pending run (none is left in flight); a subsim that answered has committed
-        its previous interval if asked to. Raises the first error after all have answered."""
-        outputs, error = {}, None
-        for name, wait in pending.items():
-            try:
-                outputs[name] = wait().outputs
-            except Exception as exc:
-                error = error or exc
-                continue
-            self._uncommitted.discard(name)
-        if error is not None:
-            raise error
-        return outputs
+    # --- one interval ----------------------------------------------------------------------------
 
     def _guess(self, times: np.ndarray, couplings: Sequence[Coupling]) -> dict[str, np.ndarray]:
-        sizes = {str(c.target): self.sizes[c.target] for c in couplings}
+        sizes = {str(c.target): self._sizes[c.target] for c in couplings}
         return first_guess(self.settings.first_guess, times, sizes, self._previous, self.settings.interp)
 
-    def _subsim_inputs(self, name: str, signals: Mapping[str, np.ndarray], n: int) -> dict[str, np.ndarray]:
+    def _inputs_of(self, name: str, signals: Mapping[str, np.ndarray], n: int) -> dict[str, np.ndarray]:
         """Inputs of ``name`` from coupled ``signals``; uncoupled inputs are zero."""
-        return {p: signals[k] if (k := f"{name}.{p}") in signals else np.zeros((n, port.size))
-                for p, port in self.inputs[name].items()}
+        return {p: signals[k] if k in signals else np.zeros((n, w)) for p, k, w in self._ports[name]}
 
     def _evaluate(self, c: Coupling, outputs: Mapping, n: int) -> np.ndarray:
-        return c.evaluate(outputs, self.sizes[c.target], n)
+        return c.evaluate(outputs, self._sizes[c.target], n)
 
     def _check(self, new: dict, old: dict, history: dict[str, list[float]]) -> Check:
         """The convergence check of one stage; appends each signal's largest residual to ``history``."""
@@ -243,50 +242,45 @@ class Coordinator:
             history.setdefault(k, []).append(float(r.max(initial=0.0)))
         return result
 
-    def _centralized(self, times: np.ndarray) -> Interval:
-        n, s = times.size, self.settings
-        inputs = self._guess(times, self.couplings)
+    def _centralized(self, times: np.ndarray) -> Generator[Action, Outputs | None, Interval]:
+        n, s, plan = times.size, self.settings, self.plan
+        inputs = self._guess(times, plan.couplings)
         history: dict[str, list[float]] = {}
         previous: dict[str, np.ndarray] | None = None
         for stage in range(s.max_stages):
-            pending = {
-                name: h.start_run_interval(times, self._subsim_inputs(name, inputs, n), s.interp,
-                                           commit=name in self._uncommitted)
-                for name, h in self.handles.items()
-            }
-            outputs = self._collect(pending)
-            if self.on_stage is not None:
-                self.on_stage(stage, outputs)
+            outputs = yield Run(stage, times, {name: self._inputs_of(name, inputs, n) for name in plan.names})
+            if self.report_stages:
+                yield StageDone(stage, outputs)
             flat = {f"{name}.{p}": v for name, ports in outputs.items() for p, v in ports.items()}
             if previous is not None:
                 result = self._check(flat, previous, history)
                 if result.converged:
                     return Interval(times, outputs, inputs, stage + 1, history)
             previous = flat
-            inputs = {str(c.target): self._evaluate(c, outputs, n) for c in self.couplings}
+            inputs = {str(c.target): self._evaluate(c, outputs, n) for c in plan.couplings}
         raise NotConverged(float(times[0]), float(times[-1]), s.max_stages, result.failing, history)
 
-    def _distributed(self, times: np.ndarray) -> Interval:
-        n, s = times.size, self.settings
-        fed_back = self._guess(times, self.feedback)
+    def _distributed(self, times: np.ndarray) -> Generator[Action, Outputs | None, Interval]:
+        n, s, plan = times.size, self.settings, self.plan
+        forward_into = {name: [c for c in plan.forward if c.target.subsim == name] for name in plan.order}
+        fed_back = self._guess(times, plan.feedback)
         history: dict[str, list[float]] = {}
         for stage in range(s.max_stages):
             inputs = dict(fed_back)
-            outputs: dict[str, dict[str, np.ndarray]] = {}
-            for name in self.order:
-                for c in self.forward:
-                    if c.target.subsim == name:
-                        inputs[str(c.target)] = self._evaluate(c, outputs, n)
-                outputs.update(self._collect({name: self.handles[name].start_run_interval(
-                    times, self._subsim_inputs(name, inputs, n), s.interp, commit=name in self._uncommitted)}))
-            if self.on_stage is not None:
-                self.on_stage(stage, outputs)
-            new = {str(c.target): self._evaluate(c, outputs, n) for c in self.feedback}
-            if not self.feedback:  # nothing to iterate: feed-forward chain is exact in one stage
+            outputs: Outputs = {}
+            for name in plan.order:
+                for c in forward_into[name]:
+                    inputs[str(c.target)] = self._evaluate(c, outputs, n)
+                outputs.update((yield Run(stage, times, {name: self._inputs_of(name, inputs, n)})))
+            if self.report_stages:
+                yield StageDone(stage, outputs)
+            if not plan.feedback:  # nothing to iterate: a feed-forward chain is exact in one stage
                 return Interval(times, outputs, inputs, stage + 1, history)
+            new = {str(c.target): self._evaluate(c, outputs, n) for c in plan.feedback}
             if stage > 0:
                 result = self._check(new, fed_back, history)
                 if result.converged:
                     return Interval(times, outputs, inputs, stage + 1, history)
             fed_back = new
         raise NotConverged(float(times[0]), float(times[-1]), s.max_stages, result.failing, history)
+

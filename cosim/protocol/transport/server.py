@@ -1,4 +1,4 @@
-"""Subsim side of the bus: serve one runtime's commands on ``cosim/<run>/<name>/rpc``.
+"""Subsim side of the Zenoh transport: serve one runtime's commands on ``cosim/<run>/<name>/rpc``.
 
 Commands are handled one at a time on the thread that calls :meth:`CommandServer.serve`, so the
 model and its state are only ever touched by that thread.
@@ -6,33 +6,13 @@ model and its state are only ever touched by that thread.
 
 from __future__ import annotations
 
-import logging
 from collections.abc import Callable
 
 import zenoh
 
-from cosim.contract import CosimError
-from cosim.protocol.bus import alive_key, coordinator_alive_key, rpc_key
-from cosim.protocol.messages import decode_request, encode_error, encode_result, request_command
+from cosim.protocol.keys import alive_key, coordinator_alive_key, rpc_key
+from cosim.protocol.service import answer
 from cosim.runtime import Runtime
-
-log = logging.getLogger(__name__)
-
-
-def answer(runtime: Runtime, payload: bytes) -> bytes:
-    """Turn one request payload into one reply payload. Never raises."""
-    cmd = "?"
-    try:
-        request = decode_request(payload)
-        cmd = request.cmd
-        return encode_result(runtime.handle(request.cmd, request.args))
-    except CosimError as exc:
-        if cmd == "?":
-            cmd = request_command(payload)
-        return encode_error(exc.code, exc.message, runtime.name, cmd)
-    except Exception as exc:  # last line of defence: the process must survive any request
-        log.exception("unexpected failure serving %s", cmd)
-        return encode_error("internal", f"{type(exc).__name__}: {exc}", runtime.name, cmd)
 
 
 class CommandServer:

@@ -1,0 +1,82 @@
+"""Cost against the number of subsims: a chain of N oscillator masses, each its own process.
+
+Mass i feels its neighbours through coupling springs, F_i = k_c (u_{i-1} + u_{i+1}) (the built-in
+``linear`` transform; each mass carries its own -k_c u_i terms in its ground stiffness), and mass 0
+starts displaced. Distributed coupling (RF-D) over Zenoh. For each N it prints the order's feedback
+signals, the time to derive the order, the stages per interval, and the marginal wall time per
+interval (the run to ``--stop`` minus the run to ``--stop / 10``, so start-up cancels), then the
+growth from the smallest to the largest N. Asserts nothing.
+
+    python benchmarks/chain.py [--sizes 4 8 16] [--stop 2.0] [--method distributed]
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+import time
+from pathlib import Path
+
+from cosim.coupler.order import derive_order, feedback_weight
+from cosim.runner import run_scenario
+from cosim.scenario import Scenario, parse
+
+K_GROUND, K_COUPLE = 4.0, 2.0
+
+
+def chain_scenario(n: int, method: str, stop: float) -> Scenario:
+    subsims, couplings = {}, []
+    for i in range(n):
+        neighbours = [j for j in (i - 1, i + 1) if 0 <= j < n]
+        subsims[f"m{i}"] = {"model": "subsims.oscillator.subsim:Mass",
+                            "params": {"m": 1.0, "k": K_GROUND + K_COUPLE * len(neighbours),
+                                       "u0": 1.0 if i == 0 else 0.0}}
+        couplings.append({"to": f"m{i}.F", "from": [f"m{j}.u" for j in neighbours], "transform": "linear",
+                          "params": {"gains": [K_COUPLE] * len(neighbours)}})
+    raw = {"name": f"chain{n}", "stop": stop, "subsims": subsims, "couplings": couplings,
+           "coupling": {"method": method, "interval": 0.05, "samples": 5, "interp": "cubic",
+                        "first_guess": "extrapolate", "tol": 1e-10, "res": 1e-12, "max_stages": 60}}
+    return parse(raw, Path(f"chain{n}.toml"))
+
+
+def timed_run(scenario: Scenario, method: str, stop: float, out: Path) -> tuple[float, int, int]:
+    started = time.perf_counter()
+    report = run_scenario(scenario, method=method, stop=stop, output=out, progress=False, log=lambda _m: None)
+    wall = time.perf_counter() - started
+    s = report.summary
+    return wall, s.intervals, sum(k * v for k, v in s.stages.items())
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--sizes", type=int, nargs="+", default=[4, 8, 16])
+    p.add_argument("--stop", type=float, default=2.0)
+    p.add_argument("--method", default="distributed", choices=["distributed", "centralized"])
+    a = p.parse_args()
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for n in a.sizes:
+            sc = chain_scenario(n, a.method, a.stop)
+            names = list(sc.subsims)
+            sizes = {c.target: 1 for c in sc.couplings}
+            t0 = time.perf_counter()
+            order = derive_order(names, sc.couplings, sizes)
+            derive_s = time.perf_counter() - t0
+            fb = feedback_weight(order, sc.couplings, sizes)
+            short = timed_run(sc, a.method, a.stop / 10, Path(tmp) / f"s{n}.csv")
+            full = timed_run(sc, a.method, a.stop, Path(tmp) / f"f{n}.csv")
+            per_interval = (full[0] - short[0]) / (full[1] - short[1])
+            rows.append((n, fb, derive_s, full[2] / full[1], per_interval))
+    print(f"chain of N masses, {a.method} over Zenoh, H = 0.05 s, 5 samples, cubic, to t = {a.stop:g} s")
+    print("|  N | feedback signals | order derived in | stages/interval | marginal ms/interval |")
+    print("|---:|-----------------:|-----------------:|----------------:|--------------------:|")
+    for n, fb, d, st, pi in rows:
+        print(f"| {n:2d} | {fb:16d} | {d * 1e3:13.1f} ms | {st:15.2f} | {pi * 1e3:19.2f} |")
+    first, last = rows[0], rows[-1]
+    print(f"\nN {first[0]} -> {last[0]}: marginal cost per interval grows {last[4] / first[4]:.2f}x "
+          f"(N grew {last[0] / first[0]:.1f}x; target <= 4.6x from 4 to 16), "
+          f"stages/interval {first[3]:.2f} -> {last[3]:.2f}")
+
+
+if __name__ == "__main__":
+    main()

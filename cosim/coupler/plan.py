@@ -1,0 +1,68 @@
+"""A coupling plan: the couplings checked once against the subsims' ports, with the execution order.
+
+Built once per run, after every subsim has described its ports; the relaxation machine and every
+driver trust it and check nothing again.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+from cosim.coupler.couplings import Coupling, Ports, SignalRef, check_couplings
+from cosim.coupler.order import check_order, derive_order, feedback_weight, is_feedback
+
+
+@dataclass(frozen=True)
+class Plan:
+    names: tuple[str, ...]  # every subsim, in declared order
+    inputs: Mapping[str, Mapping[str, int]]  # subsim -> input port -> width
+    outputs: Mapping[str, Mapping[str, int]]  # subsim -> output port -> width
+    couplings: tuple[Coupling, ...]
+    order: tuple[str, ...]  # the distributed method's execution order (declared order for centralized)
+    feedback: tuple[Coupling, ...]  # couplings with a source at or after their target in ``order``
+    forward: tuple[Coupling, ...]
+
+    @property
+    def sizes(self) -> dict[SignalRef, int]:
+        return {SignalRef(s, p): w for s, ports in self.inputs.items() for p, w in ports.items()}
+
+    @property
+    def feedback_signals(self) -> int:
+        """Scalar signals crossing the recursive transfer point in ``order``."""
+        return feedback_weight(self.order, self.couplings, self.sizes)
+
+    @classmethod
+    def build(
+        cls,
+        inputs: Ports,
+        outputs: Ports,
+        couplings: Sequence[Coupling],
+        method: str = "centralized",
+        order: Sequence[str] | None = None,
+    ) -> Plan:
+        """Check ``couplings`` (``CouplingError`` names the first bad one) and fix the order.
+
+        ``order`` (distributed only) must name every subsim once; None derives the lightest one.
+        """
+        names = tuple(inputs)
+        if set(outputs) != set(names):
+            raise ValueError(f"inputs and outputs describe different subsims: {sorted(inputs)}, {sorted(outputs)}")
+        check_couplings(couplings, inputs, outputs)
+        sizes = {SignalRef(s, p): w for s, ports in inputs.items() for p, w in ports.items()}
+        if order is not None:  # a scenario's order was checked when it was parsed; this is for direct callers
+            chosen = check_order(order, names)
+        elif method == "distributed":
+            chosen = tuple(derive_order(names, couplings, sizes))
+        else:
+            chosen = names
+        rank = {n: i for i, n in enumerate(chosen)}
+        return cls(
+            names,
+            {s: dict(p) for s, p in inputs.items()},
+            {s: dict(p) for s, p in outputs.items()},
+            tuple(couplings),
+            chosen,
+            tuple(c for c in couplings if is_feedback(c, rank)),
+            tuple(c for c in couplings if not is_feedback(c, rank)),
+        )

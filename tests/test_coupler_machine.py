@@ -1,0 +1,112 @@
+"""The relaxation state machine driven step by step, with no handle, no runtime and no transport.
+
+The "subsim" here is written in the test: y' = u integrated exactly on the polynomial through the
+input samples (what lagrange interpolation feeds a model), so the machine's stages can be checked
+against the paper's closed form (eq. 5: stage n of y' = ky is the n-th Taylor polynomial) without
+any of the framework's model code.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from cosim.coupler.convergence import Tolerance
+from cosim.coupler.couplings import Coupling
+from cosim.coupler.plan import Plan
+from cosim.coupler.relaxation import Commit, Done, NotConverged, Relaxation, Rollback, Run, Settings, StageDone
+
+
+def integrate_exactly(y0: float, times: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """y(t) = y0 + int_{t0}^{t} p(s) ds with p the polynomial through (times, u)."""
+    p = np.polynomial.Polynomial.fit(times, u, deg=times.size - 1)
+    integral = p.integ()
+    return y0 + integral(times) - integral(times[0])
+
+
+def settings(method: str, **kw) -> Settings:
+    base = dict(method=method, interval=0.9, samples=7, first_guess="zero", interp="lagrange",
+                tol=Tolerance(1e-13, 1e-15))
+    return Settings(**{**base, **kw})
+
+
+@pytest.mark.parametrize("method", ["centralized", "distributed"])
+def test_stage_n_of_y_prime_ky_is_the_nth_taylor_polynomial_without_any_handle(method: str) -> None:
+    k, y0 = -1.7, 2.0
+    plan = Plan.build({"y": {"u": 1}}, {"y": {"y": 1}}, [Coupling.make("y.u", "y.y", "gain", {"k": k})], method)
+    steps = Relaxation(plan, settings(method), report_stages=True).interval(0.0, 0.9)
+    stages: list[np.ndarray] = []
+    action = steps.send(None)
+    while not isinstance(action, Commit):
+        if isinstance(action, Run):
+            assert list(action.inputs) == ["y"] and action.stage == len(stages)
+            u = action.inputs["y"]["u"][:, 0]
+            action = steps.send({"y": {"y": integrate_exactly(y0, action.times, u)[:, None]}})
+        else:
+            assert isinstance(action, StageDone)
+            stages.append(action.outputs["y"]["y"][:, 0])
+            action = steps.send(None)
+    t = action.interval.t
+    for n in range(7):
+        taylor = y0 * sum((k * t) ** i / math.factorial(i) for i in range(n + 1))
+        np.testing.assert_allclose(stages[n], taylor, rtol=2e-13, atol=0)
+    assert action.interval.stages == len(stages) >= 8
+
+
+def two_masses() -> tuple[Plan, Plan]:
+    couplings = [Coupling.make("a.u", "b.y", "gain", {"k": -1.0}), Coupling.make("b.u", "a.y")]
+    ports_in, ports_out = {"a": {"u": 1}, "b": {"u": 1}}, {"a": {"y": 1}, "b": {"y": 1}}
+    return (Plan.build(ports_in, ports_out, couplings, "centralized"),
+            Plan.build(ports_in, ports_out, couplings, "distributed"))
+
+
+def answer(action: Run, y0: float = 1.0) -> dict:
+    return {n: {"y": integrate_exactly(y0, action.times, ins["u"][:, 0])[:, None]} for n, ins in action.inputs.items()}
+
+
+def test_centralized_runs_every_subsim_in_one_action_distributed_one_at_a_time_in_order() -> None:
+    central, distributed = two_masses()
+    assert distributed.order == ("a", "b") and [str(c) for c in distributed.feedback] == ["b.y -> a.u"]
+    cases = (("centralized", central, [["a", "b"]]), ("distributed", distributed, [["a"], ["b"]]))
+    for method, plan, per_action in cases:
+        steps = Relaxation(plan, settings(method)).interval(0.0, 0.5)
+        action, seen = steps.send(None), []
+        while isinstance(action, Run):
+            seen.append(list(action.inputs))
+            action = steps.send(answer(action))
+        assert isinstance(action, Commit)
+        assert seen == per_action * action.interval.stages
+        # distributed: b's input is a's output of the same stage (identity coupling), at once
+        if plan is distributed:
+            np.testing.assert_array_equal(action.interval.inputs["b.u"], action.interval.outputs["a"]["y"])
+
+
+def test_a_non_converging_interval_is_rolled_back_and_retried_on_its_first_half_then_fails() -> None:
+    central, _ = two_masses()
+    steps = Relaxation(central, settings("centralized", max_stages=2, max_halvings=1)).interval(0.0, 0.8)
+    action, spans = steps.send(None), []
+    with pytest.raises(NotConverged):
+        while True:
+            if isinstance(action, Run):
+                spans.append((action.times[0], action.times[-1]))
+                action = steps.send(answer(action))
+            else:
+                spans.append(action)
+                action = steps.send(None)
+    assert spans[:2] == [(0.0, 0.8), (0.0, 0.8)] and spans[2] == Rollback(0.0, 0.8)
+    assert spans[3:5] == [(0.0, 0.4), (0.0, 0.4)] and spans[5] == Rollback(0.0, 0.4) and len(spans) == 6
+
+
+def test_a_run_commits_whole_intervals_on_the_grid_and_ends_with_done() -> None:
+    central, _ = two_masses()
+    steps = Relaxation(central, settings("centralized", interval=0.3, samples=4)).run(0.0, 1.0)
+    action, commits = steps.send(None), []
+    while not isinstance(action, Done):
+        if isinstance(action, Commit):
+            commits.append((action.interval.t[0], action.interval.t[-1]))
+        action = steps.send(answer(action) if isinstance(action, Run) else None)
+    # ends on the grid start + k H (no accumulated sum of H), until past the stop time
+    assert commits == [(0.0 + k * 0.3, 0.0 + (k + 1) * 0.3) for k in range(4)]
+    assert action.summary.intervals == 4 and action.summary.t_end == commits[-1][1]
