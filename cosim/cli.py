@@ -34,11 +34,14 @@ def _run(args: argparse.Namespace) -> int:
         report = run_unified(scenario, stop=args.stop, output=args.output)
     else:
         report = run_scenario(scenario, method=args.method, stop=args.stop, output=args.output,
-                              inprocess=args.inprocess, listen=args.listen, progress=not args.quiet)
+                              inprocess=args.inprocess, listen=args.listen, progress=not args.quiet,
+                              restarts=args.restarts, timeout=args.timeout)
     s = report.summary
     hist = ", ".join(f"{k} stages: {v}" for k, v in sorted(s.stages.items()))
     print(f"{scenario.name} ({report.method}): {s.intervals} intervals to t = {s.t_end:.6g} in {s.wall_time:.2f} s"
           f"{f' ({hist})' if hist else ''}")
+    for r in report.extra.get("restarts", []):
+        print(f"restart: {r.subsim} {r.reason}; restored to t = {r.at:g}")
     if report.method == "distributed":
         print(f"order: {' -> '.join(report.order)}; feedback: {'; '.join(report.feedback) or 'none'}")
     print(f"results: {report.output}\ndiagnostics: {report.diagnostics}")
@@ -116,6 +119,12 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--listen", default="tcp/127.0.0.1:0",
                    help="router endpoint (default: loopback, free port; use tcp/0.0.0.0:7447 for other machines)")
     r.add_argument("--quiet", action="store_true", help="no progress display")
+    r.add_argument("--restarts", type=int, metavar="N",
+                   help="replace subsims that die or hang up to N times, restoring their committed state "
+                        "(default: the scenario's [run] restarts, 2; 0 stops the run at the first failure)")
+    r.add_argument("--timeout", type=float, metavar="SECONDS",
+                   help="wait this long for a reply before a subsim counts as hung (default: derived from the "
+                        "measured request times, at least 1.5 s)")
     r.set_defaults(fn=_run)
 
     d = sub.add_parser("describe", help="print subsims, couplings, execution order and feedback edges")

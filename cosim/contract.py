@@ -56,3 +56,7 @@ class SubsimError(RuntimeError):
 
 class SubsimDied(SubsimError):
     """The subsim process went away (liveliness lost or no responder)."""
+
+
+class SubsimHung(SubsimError):
+    """The subsim did not reply within the caller's deadline (stopped, stuck in its model, or cut off)."""

@@ -2,16 +2,23 @@
 
 The machine (:mod:`cosim.coupler.relaxation`) decides what runs; this module sends it through
 :class:`~cosim.handles.SubsimHandle` objects (in-process or remote, with bit-identical results),
-measures wall time, and rides each commit on the subsim's next request.
+measures wall time, rides each commit on the subsim's next request, and (with a :class:`Recovery`)
+replaces a subsim that died or hung: a new process, the last checkpoint of its committed state
+(``set_state``), the committed intervals since then replayed on the very inputs they converged
+with, then the interrupted interval again from stage 0. ``advance`` is pure, so the result is
+bit-identical to an undisturbed run.
 """
 
 from __future__ import annotations
 
 import time
+from collections import deque
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
 
 import numpy as np
 
+from cosim.contract import SubsimDied, SubsimError, SubsimHung
 from cosim.coupler.couplings import Coupling
 from cosim.coupler.plan import Plan
 from cosim.coupler.relaxation import (
@@ -20,6 +27,7 @@ from cosim.coupler.relaxation import (
     Interval,
     Outputs,
     Relaxation,
+    RetryInterval,
     Rollback,
     Run,
     RunSummary,
@@ -28,9 +36,62 @@ from cosim.coupler.relaxation import (
     Steps,
     sample_times,
 )
-from cosim.handles import Description, IntervalResult, SubsimHandle
+from cosim.handles import Description, IntervalResult, SubsimHandle, SubsimState
 
 OnStage = Callable[[int, Outputs], None]
+Revive = Callable[[str], SubsimHandle]  # a new process for the named subsim, configured at the run's start
+
+
+@dataclass
+class Deadline:
+    """How long to wait for a reply before calling a subsim hung.
+
+    ``fixed`` seconds if given; otherwise ``factor`` times the slowest of the last ``window`` runs, at least
+    ``floor``; ``initial`` until ``warmup`` runs have been timed (the first requests pay imports and caches).
+    """
+
+    fixed: float | None = None
+    floor: float = 1.5
+    factor: float = 100.0
+    initial: float = 30.0
+    warmup: int = 5
+    window: int = 200
+    _recent: deque = field(default_factory=lambda: deque(maxlen=200), repr=False)
+
+    def seconds(self) -> float:
+        if self.fixed is not None:
+            return self.fixed
+        if len(self._recent) < self.warmup:
+            return self.initial
+        return max(self.floor, self.factor * max(self._recent))
+
+    def observe(self, seconds: float) -> None:
+        self._recent.append(seconds)
+
+
+@dataclass
+class Recovery:
+    """Replace subsims that die or hang: ``revive(name)`` gives a new, configured one; at most ``restarts``
+    replacements in a run; a checkpoint of every subsim's committed state each ``checkpoint_every`` intervals."""
+
+    revive: Revive
+    restarts: int = 2
+    checkpoint_every: int = 200
+    log: Callable[[str], None] = print
+
+
+@dataclass(frozen=True)
+class Restart:
+    """One replacement, for the diagnostics."""
+
+    subsim: str
+    at: float  # the committed time it was restored to
+    reason: str
+    replayed: int  # committed intervals replayed since the checkpoint
+
+
+def _recoverable(exc: BaseException) -> bool:
+    return isinstance(exc, (SubsimDied, SubsimHung))
 
 
 def plan_for(
@@ -57,10 +118,21 @@ class Coordinator:
         settings: Settings,
         descriptions: Mapping[str, Description] | None = None,
         on_stage: OnStage | None = None,
+        recovery: Recovery | None = None,
+        deadline: Deadline | None = None,
     ) -> None:
         self.handles = dict(handles)
         self.settings = settings
         self.on_stage = on_stage
+        self.recovery = recovery
+        self.deadline = deadline or Deadline()
+        self.restarts: list[Restart] = []
+        # what a replacement needs: each subsim's last checkpoint, the committed intervals since (their times and
+        # the inputs each subsim converged with), and the inputs sent to each subsim in its latest run
+        self._checkpoints: dict[str, SubsimState] = {}
+        self._journal: list[tuple[np.ndarray, dict[str, dict[str, np.ndarray]]]] = []
+        self._sent: dict[str, dict[str, np.ndarray]] = {}
+        self._commits = 0
         if isinstance(couplings, Plan):
             self.plan = couplings
         else:
@@ -98,6 +170,8 @@ class Coordinator:
         self, t_start: float, t_stop: float, on_interval: Callable[[Interval], None] | None = None
     ) -> RunSummary:
         """Advance whole intervals from ``t_start`` (every subsim's committed time) past ``t_stop``."""
+        if self.recovery is not None and not self._checkpoints:
+            self._checkpoint()
         summary = self._drive(self._relaxation().run(t_start, t_stop), on_interval)
         self.commit_pending()
         assert summary is not None
@@ -110,6 +184,8 @@ class Coordinator:
         its first quarter, ...; the returned interval then ends before ``t1``.
         """
         done: list[Interval] = []
+        if self.recovery is not None and not self._checkpoints:
+            self._checkpoint()
         self._drive(self._relaxation().interval(t0, t1), done.append)
         self.commit_pending()
         return done[0]
@@ -117,8 +193,7 @@ class Coordinator:
     def commit_pending(self) -> None:
         """Commit, in one concurrent round trip, the converged trials still waiting for a next interval."""
         names = [n for n in self.handles if n in self._uncommitted]
-        for wait in [self.handles[n].start_commit() for n in names]:
-            wait()
+        self._gather({n: self.handles[n].start_commit() for n in names}, "commit")
         self._uncommitted.clear()
 
     # --- performing the machine's actions -------------------------------------------------------
@@ -126,14 +201,18 @@ class Coordinator:
     def _drive(self, steps: Steps, on_interval: Callable[[Interval], None] | None) -> RunSummary | None:
         started = time.perf_counter()
         reply: Outputs | None = None
+        retry = False
         while True:
             try:
-                action = steps.send(reply)
+                action = steps.throw(RetryInterval()) if retry else steps.send(reply)
             except StopIteration as stop:
                 return stop.value
-            reply = None
+            reply, retry = None, False
             if isinstance(action, Run):
-                reply = self._run(action)
+                try:
+                    reply = self._run(action)
+                except _Replaced:
+                    retry = True
             elif isinstance(action, StageDone):
                 if self.on_stage is not None:
                     self.on_stage(action.stage, action.outputs)
@@ -143,6 +222,7 @@ class Coordinator:
             elif isinstance(action, Commit):
                 self._uncommitted = set(self.handles)
                 action.interval.wall_time = time.perf_counter() - started
+                self._journal_commit(action.interval)
                 if on_interval is not None:
                     on_interval(action.interval)
                 started = time.perf_counter()
@@ -151,20 +231,100 @@ class Coordinator:
 
     def _run(self, action: Run) -> Outputs:
         """Start every run of the action, then wait for all (none is left in flight). A subsim that
-        answered has committed its previous interval if asked to. Raises the first error after all answered."""
+        answered has committed its previous interval if asked to. Raises the first error after all answered,
+        or :class:`_Replaced` when every failure was a subsim that died or hung and has been replaced."""
         interp, uncommitted = self.settings.interp, self._uncommitted
-        pending: dict[str, Callable[[], IntervalResult]] = {
-            name: self.handles[name].start_run_interval(action.times, inputs, interp, commit=name in uncommitted)
-            for name, inputs in action.inputs.items()
-        }
-        outputs, error = {}, None
+        deadline = self.deadline.seconds()
+        pending: dict[str, Callable[[], IntervalResult]] = {}
+        sent = time.perf_counter()
+        for name, inputs in action.inputs.items():
+            handle = self.handles[name]
+            handle.deadline = deadline
+            self._sent[name] = inputs
+            try:
+                pending[name] = handle.start_run_interval(action.times, inputs, interp, commit=name in uncommitted)
+            except SubsimError as exc:  # it was known to be gone before sending
+                pending[name] = _raiser(exc)
+        try:
+            results = self._gather(pending, "run_interval", replace=True)
+        except _Replaced as replaced:  # who answered has committed what rode on the request
+            uncommitted.difference_update(replaced.answered)
+            raise
+        self.deadline.observe(time.perf_counter() - sent)
+        uncommitted.difference_update(results)
+        return {name: r.outputs for name, r in results.items()}
+
+    def _gather(self, pending: Mapping[str, Callable[[], object]], what: str, replace: bool = False) -> dict:
+        """Wait for every pending request; replace the subsims that died or hung (when a recovery is set and
+        restarts are left), then raise :class:`_Replaced` if ``replace``; raise any other error."""
+        results, errors = {}, {}
         for name, wait in pending.items():
             try:
-                outputs[name] = wait().outputs
+                results[name] = wait()
             except Exception as exc:
-                error = error or exc
-                continue
-            uncommitted.discard(name)
-        if error is not None:
-            raise error
-        return outputs
+                errors[name] = exc
+        if not errors:
+            return results
+        fatal = [e for e in errors.values() if not _recoverable(e)]
+        left = 0 if self.recovery is None else self.recovery.restarts - len(self.restarts)
+        if fatal or len(errors) > left:
+            raise fatal[0] if fatal else next(iter(errors.values()))
+        for name, exc in errors.items():
+            self._replace(name, exc)
+        if replace:
+            raise _Replaced(set(results))
+        results.update({name: None for name in errors})  # a replaced subsim is restored committed
+        return results
+
+    # --- recovery -------------------------------------------------------------------------------
+
+    def _checkpoint(self) -> None:
+        """Every subsim's committed state now; the journal keeps only what a checkpoint does not cover."""
+        self.commit_pending()
+        self._checkpoints = {name: h.get_state() for name, h in self.handles.items()}
+        oldest = min(cp.time for cp in self._checkpoints.values())
+        self._journal = [entry for entry in self._journal if entry[0][0] >= oldest]
+
+    def _journal_commit(self, interval: Interval) -> None:
+        if self.recovery is None:
+            return
+        self._journal.append((interval.t, dict(self._sent)))
+        self._commits += 1
+        if self._commits % self.recovery.checkpoint_every == 0:
+            self._checkpoint()
+
+    def _replace(self, name: str, why: Exception) -> None:
+        """A new process for ``name`` at its last checkpoint, with every committed interval since replayed."""
+        assert self.recovery is not None
+        reason = f"{'died' if isinstance(why, SubsimDied) else 'hung'} ({why})"
+        self.handles[name].close()
+        handle = self.recovery.revive(name)
+        checkpoint = self._checkpoints[name]
+        handle.set_state(checkpoint)
+        replay = [(t, inputs[name]) for t, inputs in self._journal if t[0] >= checkpoint.time]
+        for i, (t, inputs) in enumerate(replay):
+            handle.run_interval(t, inputs, self.settings.interp, commit=i > 0)
+        if replay:
+            handle.commit()
+        self.handles[name] = handle
+        self._uncommitted.discard(name)
+        at = float(replay[-1][0][-1]) if replay else checkpoint.time
+        self.restarts.append(Restart(name, at, reason, len(replay)))
+        self.recovery.log(f"cosim: {name} {reason}; replaced ({len(self.restarts)} of {self.recovery.restarts}), "
+                          f"restored to t = {at:g} (checkpoint at t = {checkpoint.time:g}, "
+                          f"{len(replay)} intervals replayed)")
+
+
+class _Replaced(Exception):
+    """Every failed subsim of a run was replaced: the interval starts again. ``answered``: the others."""
+
+    def __init__(self, answered: set[str]) -> None:
+        super().__init__(answered)
+        self.answered = answered
+
+
+def _raiser(exc: Exception) -> Callable[[], IntervalResult]:
+    def fail() -> IntervalResult:
+        raise exc
+
+    return fail

@@ -62,6 +62,7 @@ class SubsimHandle:
     """What the coupler sees of a subsim. Subclasses implement :meth:`_begin`."""
 
     name: str
+    deadline: float | None = None  # seconds a remote caller waits for a reply (ignored in-process)
 
     def _begin(self, cmd: str, args: dict[str, Any]) -> Callable[[], dict]:
         """Send ``cmd``; return a function that waits for and returns its checked result."""

@@ -20,11 +20,12 @@ from cosim.protocol.transport.session import open_router
 
 
 def subsim_command(
-    module: str, endpoint: str, run: str, name: str, model: str | None = None, python: str = sys.executable
+    module: str, endpoint: str, run: str, name: str, model: str | None = None, python: str = sys.executable,
+    lease: float | None = None,
 ) -> list[str]:
     """``python -m module`` for a subsim package, or ``python -m cosim.serve model`` for any class."""
     head = [python, "-m", "cosim.serve", model] if model else [python, "-m", module]
-    return [*head, "--connect", endpoint, "--run", run, "--name", name]
+    return [*head, "--connect", endpoint, "--run", run, "--name", name, *(["--lease", f"{lease:g}"] if lease else [])]
 
 
 @dataclass
@@ -34,6 +35,9 @@ class SubsimProcess:
     name: str
     popen: subprocess.Popen
     handle: RemoteHandle
+    module: str = ""
+    model: str | None = None
+    lease: float | None = None
 
     def stop(self, grace: float = 3.0) -> int:
         """Ask for ``shutdown``, then SIGTERM, then SIGKILL; always reaps the process."""
@@ -90,18 +94,19 @@ class Bus:
         wait: float = 20.0,
         quiet: bool = False,
         model: str | None = None,
+        lease: float | None = None,
     ) -> SubsimProcess:
         """Start ``python -m module`` (or ``cosim.serve model``) as subsim ``name``; wait until it answers."""
         env = dict(os.environ)
         env.setdefault("PYTHONUNBUFFERED", "1")
         popen = subprocess.Popen(
-            subsim_command(module, self.endpoint, self.run, name, model),
+            subsim_command(module, self.endpoint, self.run, name, model, lease=lease),
             env=env,
             stdout=subprocess.DEVNULL if quiet else None,
             stderr=subprocess.DEVNULL if quiet else None,
         )
         handle = RemoteHandle(self.session, self.run, name, timeout=timeout)
-        proc = SubsimProcess(name, popen, handle)
+        proc = SubsimProcess(name, popen, handle, module, model, lease)
         self.processes.append(proc)
         try:
             _wait_ready_or_exit(handle, popen, wait)
@@ -109,6 +114,18 @@ class Bus:
             proc.stop(grace=1.0)
             raise
         return proc
+
+    def respawn(self, name: str, **spawn_args: object) -> SubsimProcess:
+        """Kill the process serving ``name`` (it died or hung: no grace) and start a new one the same way."""
+        old = next((p for p in self.processes if p.name == name), None)
+        if old is None:
+            raise KeyError(f"no process of this bus serves {name!r}")
+        if old.popen.poll() is None:
+            old.popen.kill()
+        old.popen.wait()
+        old.handle.close()
+        self.processes.remove(old)
+        return self.spawn(old.module, name, model=old.model, lease=old.lease, **spawn_args)  # type: ignore[arg-type]
 
     def close(self) -> None:
         """Stop every spawned process, then close the session (the order matters: see zenoh-notes P1)."""

@@ -43,6 +43,7 @@ def parse_args(model_cls: type[Subsim], argv: Sequence[str] | None) -> argparse.
     p.add_argument("--name", default=model_cls.name, help=f"instance name on the bus (default: {model_cls.name})")
     p.add_argument("--connect-timeout", type=float, default=10.0, help="seconds to wait for the coordinator")
     p.add_argument("--history", type=int, default=DEFAULT_HISTORY, help="committed states kept for rollback")
+    p.add_argument("--lease", type=float, default=10.0, help="seconds a silent link to the coordinator lives")
     args = p.parse_args(argv)
     try:
         check_name(args.run, "--run")
@@ -77,7 +78,7 @@ def main(model_cls: type[Subsim], argv: Sequence[str] | None = None) -> int:
     signal.signal(signal.SIGTERM, _raise_stop)
     signal.signal(signal.SIGINT, _raise_stop)
     try:
-        session = zenoh.open(client_config(args.connect, args.connect_timeout))
+        session = zenoh.open(client_config(args.connect, args.connect_timeout, int(args.lease * 1000)))
     except (zenoh.ZError, _Stop) as exc:
         print(
             f"{args.name}: cannot reach the coordinator at {args.connect} within {args.connect_timeout:g} s ({exc})",

@@ -14,7 +14,7 @@ from cosim.contract import SubsimError
 from cosim.coupler.couplings import CouplingError, SignalRef
 from cosim.coupler.plan import Plan
 from cosim.coupler.relaxation import Interval, RunSummary
-from cosim.driver import Coordinator, plan_for
+from cosim.driver import Coordinator, Deadline, Recovery, plan_for
 from cosim.handles import Description, InProcessHandle, SubsimHandle
 from cosim.launch import Bus, subsim_command
 from cosim.progress import Progress
@@ -48,6 +48,21 @@ class Session:
     descriptions: dict[str, Description]
     bus: Bus | None = None
     plans: dict[str, Plan] = field(default_factory=dict)  # per method, checked once
+    external_wait: float = 300.0
+    timeout: float = 120.0
+
+    def revive(self, name: str) -> SubsimHandle:
+        """A new process for a subsim that died or hung, configured as at the run's start: a launched one is
+        killed and started again; an external one is waited for to attach again under its name."""
+        if self.bus is None:
+            raise ScenarioError(f"{self.scenario.path}: {name} failed in-process: nothing to restart")
+        spec = self.scenario.subsims[name]
+        if spec.external:
+            handle: SubsimHandle = self.bus.attach(name, timeout=self.timeout, wait=self.external_wait)
+        else:
+            handle = self.bus.respawn(name, timeout=self.timeout).handle
+        handle.configure(spec.params, t0=self.scenario.start)
+        return handle
 
     def close(self) -> None:
         for h in self.handles.values():
@@ -74,7 +89,7 @@ def open_session(
             handles[name] = InProcessHandle(spec.model_class()(), name)
     else:
         bus = Bus.open(listen)
-    session = Session(scenario, handles, {}, bus)
+    session = Session(scenario, handles, {}, bus, external_wait=external_wait, timeout=timeout)
     try:
         if bus is not None:
             for name, spec in scenario.subsims.items():
@@ -86,7 +101,8 @@ def open_session(
                         f"machine's address)")
                     handles[name] = bus.attach(name, timeout=timeout, wait=external_wait)
                 else:
-                    handles[name] = bus.spawn("", name, timeout=timeout, model=spec.model).handle
+                    process = bus.spawn("", name, timeout=timeout, model=spec.model, lease=scenario.run.lease)
+                    handles[name] = process.handle
         for name, spec in scenario.subsims.items():
             try:
                 session.descriptions[name] = handles[name].configure(spec.params, t0=scenario.start)
@@ -141,14 +157,24 @@ def run_scenario(
     progress: bool = True,
     log: Log = _stderr,
     on_interval: Callable[[Interval], None] | None = None,
+    restarts: int | None = None,
+    timeout: float | None = None,
 ) -> RunReport:
+    """Run ``scenario``; ``restarts`` and ``timeout`` override its [run] table (see ``cosim.scenario.KEYS``)."""
     method = method or scenario.default_method
     settings = scenario.settings_for(method)
     stop = scenario.stop if stop is None else stop
     output = output or default_output(scenario, method)
     session = open_session(scenario, inprocess=inprocess, listen=listen, log=log)
     try:
-        coordinator = Coordinator(session.handles, session.plans[method], settings)
+        spec = scenario.run
+        restarts = spec.restarts if restarts is None else restarts
+        recovery = None
+        if restarts and not inprocess:
+            recovery = Recovery(session.revive, restarts, spec.checkpoint_every, log)
+        deadline = Deadline(fixed=timeout if timeout is not None else spec.timeout)
+        coordinator = Coordinator(session.handles, session.plans[method], settings, recovery=recovery,
+                                  deadline=deadline)
         writer = ResultWriter(output, output_signals(scenario, session.descriptions))
         bar = Progress(scenario.start, stop, enabled=progress)
 
@@ -164,6 +190,6 @@ def run_scenario(
             writer.close()
             bar.done()
         return RunReport(method, summary, output, diag_path(output), coordinator.order,
-                         [str(c) for c in coordinator.feedback])
+                         [str(c) for c in coordinator.feedback], {"restarts": coordinator.restarts})
     finally:
         session.close()

@@ -81,13 +81,20 @@ KEYS: dict[str, dict[str, Key]] = {
                     "result file, .csv or .npz; relative to the working directory"),
         "signals": Key("list of strings", "every output", "", "'subsim.port' outputs to write"),
     },
+    "run": {
+        "restarts": Key("integer", "2", "", "replacements of subsims that die or hang before the run fails (0: fail)"),
+        "timeout": Key("number", "auto", "s", "wait for a reply before a subsim counts as hung; auto: 100 times the "
+                       "slowest recent request, at least 1.5 s (30 s for the first few)"),
+        "checkpoint_every": Key("integer", "200", "", "intervals between checkpoints of every subsim's state"),
+        "lease": Key("number", "10", "s", "Zenoh link lease of launched subsims: how long a silent link lives"),
+    },
     "unified": {
         "function": Key("string", "none", "", "'package.module:function' of the one-integrator reference (RK-U)"),
         "params": Key("table", "{}", "", "keyword arguments of that function"),
     },
 }
 KEYS["coupling.<method>"] = {k: v for k, v in KEYS["coupling"].items() if k != "method"}
-TABLES = {"coupling", "subsims", "couplings", "tolerances", "output", "unified"}
+TABLES = {"coupling", "subsims", "couplings", "tolerances", "output", "unified", "run"}
 
 
 class ScenarioError(ValueError):
@@ -112,6 +119,16 @@ class UnifiedSpec:
 
 
 @dataclass(frozen=True)
+class RunSpec:
+    """Fault handling of a run ([run])."""
+
+    restarts: int = 2
+    timeout: float | None = None  # None: derived from measured request times
+    checkpoint_every: int = 200
+    lease: float = 10.0
+
+
+@dataclass(frozen=True)
 class Scenario:
     path: Path
     name: str
@@ -125,6 +142,7 @@ class Scenario:
     output_path: Path | None
     output_signals: tuple[str, ...] | None
     unified: UnifiedSpec | None = None
+    run: RunSpec = RunSpec()
     raw: Mapping[str, Any] = field(default_factory=dict)  # the file's tables, for variants: parse({**raw, ...})
 
     def settings_for(self, method: str | None = None) -> Settings:
@@ -159,7 +177,8 @@ def parse(raw: Mapping[str, Any], path: Path) -> Scenario:
     out_path, signals = p.output(p.table(raw, "output"))
     return Scenario(path, str(raw.get("name", path.stem)), str(raw.get("description", "")), start, stop,
                     MappingProxyType(subsims), couplings, MappingProxyType(settings), default_method, out_path,
-                    signals, p.unified(p.table(raw, "unified")), MappingProxyType(dict(raw)))
+                    signals, p.unified(p.table(raw, "unified")), p.run(p.table(raw, "run")),
+                    MappingProxyType(dict(raw)))
 
 
 def with_method(s: Scenario, method: str) -> Scenario:
@@ -297,6 +316,24 @@ class _Parser:
         if signals is not None and (not isinstance(signals, list) or not all(isinstance(s, str) for s in signals)):
             raise self.fail("output.signals", "must be a list of 'subsim.port' strings")
         return out_path, tuple(signals) if signals is not None else None
+
+    def run(self, table: Mapping[str, Any]) -> RunSpec:
+        self.known(table, set(KEYS["run"]), "run")
+        spec = RunSpec()
+        for key in ("restarts", "checkpoint_every"):
+            v = table.get(key, getattr(spec, key))
+            if isinstance(v, bool) or not isinstance(v, int) or v < (0 if key == "restarts" else 1):
+                raise self.fail(f"run.{key}", f"must be an integer >= {0 if key == 'restarts' else 1}, got {v!r}")
+        timeout = table.get("timeout", "auto")
+        if timeout != "auto":
+            timeout = self.number(table, "timeout", where="run")
+            if not 0 < timeout < float("inf"):
+                raise self.fail("run.timeout", f"must be 'auto' or a positive number of seconds, got {timeout!r}")
+        lease = self.number(table, "lease", spec.lease, where="run")
+        if not 0.5 <= lease <= 3600:
+            raise self.fail("run.lease", f"must be between 0.5 and 3600 seconds, got {lease!r}")
+        return RunSpec(table.get("restarts", spec.restarts), None if timeout == "auto" else timeout,
+                       table.get("checkpoint_every", spec.checkpoint_every), lease)
 
     def unified(self, table: Mapping[str, Any]) -> UnifiedSpec | None:
         self.known(table, set(KEYS["unified"]), "unified")

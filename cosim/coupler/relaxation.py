@@ -113,6 +113,11 @@ class NotConverged(RuntimeError):
         self.t0, self.t1, self.stages, self.failing, self.residuals = t0, t1, stages, failing, residuals
 
 
+class RetryInterval(Exception):
+    """Thrown into a running stream by a driver that replaced a subsim: every subsim is back at the
+    interval's start (committed state), and the interval runs again from stage 0."""
+
+
 # --- actions ----------------------------------------------------------------------------------
 
 
@@ -208,10 +213,7 @@ class Relaxation:
         for halvings in range(s.max_halvings + 1):
             times = sample_times(t0, t0 + (t1 - t0) / 2**halvings, s.samples)
             try:
-                if s.method == "centralized":
-                    interval = yield from self._centralized(times)
-                else:
-                    interval = yield from self._distributed(times)
+                interval = yield from self._converge(times)
                 break
             except NotConverged:
                 yield Rollback(float(times[0]), float(times[-1]))
@@ -221,6 +223,16 @@ class Relaxation:
         self._previous = {k: (interval.t, v) for k, v in interval.inputs.items()}
         yield Commit(interval)
         return interval
+
+    def _converge(self, times: np.ndarray) -> Generator[Action, Outputs | None, Interval]:
+        """The interval's stages; from stage 0 again whenever the driver throws :class:`RetryInterval`."""
+        while True:
+            try:
+                if self.settings.method == "centralized":
+                    return (yield from self._centralized(times))
+                return (yield from self._distributed(times))
+            except RetryInterval:
+                continue
 
     # --- one interval ----------------------------------------------------------------------------
 

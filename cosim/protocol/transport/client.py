@@ -9,19 +9,44 @@ from typing import Any
 
 import zenoh
 
-from cosim.contract import ProtocolError, SubsimDied, SubsimError
+from cosim.contract import ProtocolError, SubsimDied, SubsimError, SubsimHung
 from cosim.handles import SubsimHandle
 from cosim.protocol.keys import alive_key, check_name, rpc_key
 from cosim.protocol.messages import ErrorInfo, decode_reply, encode_request
 
 
+class _Pending:
+    """One request in flight: zenoh's thread hands over the first reply, or the end of the query."""
+
+    __slots__ = ("done", "reply")
+
+    def __init__(self) -> None:
+        self.done = threading.Event()
+        self.reply: zenoh.Reply | None = None
+
+    def on_reply(self, reply: zenoh.Reply) -> None:
+        if self.reply is None:
+            self.reply = reply
+            self.done.set()
+
+    def on_end(self) -> None:
+        self.done.set()
+
+
 class RemoteHandle(SubsimHandle):
-    """Zenoh request/reply to ``cosim/<run>/<name>/rpc``; liveliness reports a dead process at once."""
+    """Zenoh request/reply to ``cosim/<run>/<name>/rpc``; liveliness reports a dead process at once.
+
+    ``timeout``: zenoh's own limit on a query. ``deadline`` (seconds, or None): how long a caller waits for
+    a reply before it calls the subsim hung (``SubsimHung``); the driver sets it from measured request
+    times, so a stopped or stuck process is found long before ``timeout``.
+    """
 
     def __init__(self, session: zenoh.Session, run: str, name: str, timeout: float = 60.0) -> None:
         self.session, self.run, self.name = session, run, check_name(name, "subsim name")
         self._key = rpc_key(run, name)
         self.timeout = timeout
+        self.deadline: float | None = None
+        self._in_flight: set[_Pending] = set()
         # A declared querier costs about 35 us less per request than session.get. Its timeout is fixed
         # at declaration, and a querier declared late may not see the subsim yet, so a request made
         # after ``timeout`` changed goes through session.get instead.
@@ -40,6 +65,8 @@ class RemoteHandle(SubsimHandle):
         else:
             self._alive.clear()
             self._died.set()
+            for pending in list(self._in_flight):  # wake every waiter now: no reply will come
+                pending.on_end()
 
     @property
     def alive(self) -> bool:
@@ -66,18 +93,27 @@ class RemoteHandle(SubsimHandle):
         if self._died.is_set():
             raise SubsimDied("no_responder", "the subsim process is gone (liveliness lost)", self.name, cmd)
         payload = encode_request(cmd, args)
+        pending = _Pending()
+        # the callback runs on zenoh's thread and only hands the reply over: no channel, no extra thread
+        handler = zenoh.handlers.Callback(pending.on_reply, pending.on_end, indirect=False)
+        self._in_flight.add(pending)
         if self.timeout == self._querier_timeout:
-            replies = self._querier.get(payload=payload)
+            self._querier.get(handler, payload=payload)
         else:
-            replies = self.session.get(
-                self._key, payload=payload, timeout=self.timeout, consolidation=zenoh.ConsolidationMode.NONE
-            )
-        return lambda: self._finish(cmd, replies)
+            self.session.get(self._key, handler, payload=payload, timeout=self.timeout,
+                             consolidation=zenoh.ConsolidationMode.NONE)
+        return lambda: self._finish(cmd, pending)
 
-    def _finish(self, cmd: str, replies: Any) -> dict:
-        # blocks until the reply or the end of the request: a waiting coordinator leaves the cores to the
-        # subsims (a polling wait was 40-60 us faster per round trip but burned a core the subsims need)
-        reply = next(iter(replies), None)
+    def _finish(self, cmd: str, pending: _Pending) -> dict:
+        # blocks until the reply, the end of the query or the deadline: a waiting coordinator leaves the cores
+        # to the subsims (a polling wait was 40-60 us faster per round trip but burned a core they need)
+        try:
+            if not pending.done.wait(self.deadline):
+                raise SubsimHung("timeout", f"no reply within the {self.deadline:g} s deadline (hung or stopped?)",
+                                 self.name, cmd)
+        finally:
+            self._in_flight.discard(pending)
+        reply = pending.reply
         if reply is not None:
             if reply.ok is None:
                 text = reply.err.payload.to_bytes().decode(errors="replace")
