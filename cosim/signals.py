@@ -18,7 +18,7 @@ import numpy as np
 # scheme name -> polynomial degree it reproduces exactly (None: n-1 for n samples)
 SCHEMES: dict[str, int | None] = {"linear": 1, "cubic": 3, "lagrange": None}
 
-Interpolant = Callable[[float], np.ndarray]
+Interpolant = Callable[[float | np.ndarray], np.ndarray]  # t -> (m,); times (k,) -> (k, m)
 
 
 class SegmentError(ValueError):
@@ -90,7 +90,7 @@ class Segment:
         return self.values.shape[1]
 
     def interpolant(self, scheme: str = "linear") -> Interpolant:
-        """A function t -> values at t, shape (m,)."""
+        """A function t -> values at t, shape (m,); given an array of times (k,) it returns (k, m)."""
         return interpolant(self.times, self.values, scheme)
 
     def __call__(self, t: float, scheme: str = "linear") -> np.ndarray:
@@ -106,11 +106,35 @@ def interpolant(times: np.ndarray, values: np.ndarray, scheme: str = "linear") -
     return build(times, values)
 
 
+def _times_array(t: float | np.ndarray) -> np.ndarray | None:
+    """``t`` as a float64 array when it is an array of times; None for one time (a number or a 0-d array)."""
+    if isinstance(t, (float, int)):
+        return None
+    ts = np.asarray(t, dtype=np.float64)
+    return ts if ts.ndim else None
+
+
+def _vectorized(scalar: Callable[[float], np.ndarray], batch: Callable[[np.ndarray], np.ndarray]) -> Interpolant:
+    """One interpolant: a time gives (m,) by ``scalar``; an array of times (k,) gives (k, m) by ``batch``, whose
+    every row is bit-identical to ``scalar`` at that time (same operations in the same order, per row)."""
+
+    def at(t: float | np.ndarray) -> np.ndarray:
+        ts = _times_array(t)
+        if ts is None:
+            return scalar(float(t))
+        if ts.ndim == 1:
+            return batch(ts)
+        out = batch(ts.reshape(-1))
+        return out.reshape(ts.shape + out.shape[1:])
+
+    return at
+
+
 def _linear(times: np.ndarray, values: np.ndarray) -> Interpolant:
     grid = times.tolist()
     n = len(grid)
     if n == 1:
-        return lambda t: values[0].copy()
+        return _vectorized(lambda t: values[0].copy(), lambda ts: np.repeat(values[:1], ts.size, axis=0))
 
     def at(t: float) -> np.ndarray:
         i = min(max(bisect.bisect_right(grid, t) - 1, 0), n - 2)
@@ -118,15 +142,35 @@ def _linear(times: np.ndarray, values: np.ndarray) -> Interpolant:
         # exact at both ends of the step (w = 0 or 1), and no overflow of values[i + 1] - values[i]
         return (1.0 - w) * values[i] + w * values[i + 1]
 
-    return at
+    def batch(ts: np.ndarray) -> np.ndarray:
+        i = np.clip(np.searchsorted(times, ts, side="right") - 1, 0, n - 2)  # bisect_right, per time
+        w = ((ts - times[i]) / (times[i + 1] - times[i]))[:, None]
+        return (1.0 - w) * values[i] + w * values[i + 1]
+
+    return _vectorized(at, batch)
+
+
+def _barycentric_weights(x: np.ndarray) -> np.ndarray:
+    diff = x[:, None] - x[None, :]
+    np.fill_diagonal(diff, 1.0)
+    return 1.0 / np.prod(diff, axis=1)
+
+
+def _barycentric_sum(c: np.ndarray, vals: np.ndarray) -> np.ndarray:
+    """(sum_j c_j v_j) / (sum_j c_j), summed node by node in order (no BLAS: the same rounding for one time and
+    for many). ``c`` (..., k) weights, ``vals`` (..., k, m) the node values."""
+    num = c[..., 0, None] * vals[..., 0, :]
+    den = c[..., 0]
+    for j in range(1, c.shape[-1]):
+        num = num + c[..., j, None] * vals[..., j, :]
+        den = den + c[..., j]
+    return num / den[..., None]
 
 
 def _barycentric(nodes: np.ndarray, vals: np.ndarray) -> Interpolant:
     """Polynomial through all ``nodes`` (second barycentric form, stable for small n)."""
     x = nodes
-    diff = x[:, None] - x[None, :]
-    np.fill_diagonal(diff, 1.0)
-    w = 1.0 / np.prod(diff, axis=1)
+    w = _barycentric_weights(x)
     xs = x.tolist()
 
     def at(t: float) -> np.ndarray:
@@ -134,9 +178,28 @@ def _barycentric(nodes: np.ndarray, vals: np.ndarray) -> Interpolant:
             return vals[xs.index(t)].copy()
         d = t - x
         c = w * (np.abs(d).min() / d)  # scaled: w / d overflows when t is within rounding of a node
-        return (c @ vals) / c.sum()
+        return _barycentric_sum(c, vals)
 
-    return at
+    def batch(ts: np.ndarray) -> np.ndarray:
+        return _barycentric_batch(ts, x[None, :], w[None, :], vals[None, :, :], np.zeros(ts.size, dtype=np.intp))
+
+    return _vectorized(at, batch)
+
+
+def _barycentric_batch(ts: np.ndarray, x: np.ndarray, w: np.ndarray, vals: np.ndarray, piece: np.ndarray) -> np.ndarray:
+    """Per time ``ts[r]``, the polynomial of piece ``piece[r]`` (nodes ``x[p]``, weights ``w[p]``, values
+    ``vals[p]``), as ``_barycentric``'s scalar form computes it; a time on a node gives that node's value."""
+    xp = x[piece]
+    d = ts[:, None] - xp
+    hit = d == 0.0
+    on_node = hit.any(axis=1)
+    d[hit] = 1.0  # rows with a hit are replaced below; keeps the others free of 0/0
+    c = w[piece] * (np.abs(d).min(axis=1)[:, None] / d)
+    out = _barycentric_sum(c, vals[piece])
+    if on_node.any():
+        r = np.flatnonzero(on_node)
+        out[r] = vals[piece[r], np.argmax(hit[r], axis=1)]
+    return out
 
 
 def _lagrange(times: np.ndarray, values: np.ndarray) -> Interpolant:
@@ -150,12 +213,19 @@ def _cubic(times: np.ndarray, values: np.ndarray) -> Interpolant:
         return _barycentric(times, values)
     grid = times.tolist()
     pieces = [_barycentric(times[s : s + 4], values[s : s + 4]) for s in range(n - 3)]
+    node = np.arange(n - 3)[:, None] + np.arange(4)
+    x, vals = times[node], values[node]  # (n-3, 4) nodes and (n-3, 4, m) values of each piece
+    w = np.array([_barycentric_weights(xp) for xp in x])  # as each piece computes its own
 
     def at(t: float) -> np.ndarray:
         i = min(max(bisect.bisect_right(grid, t) - 1, 0), n - 2)
         return pieces[min(max(i - 1, 0), n - 4)](t)
 
-    return at
+    def batch(ts: np.ndarray) -> np.ndarray:
+        i = np.clip(np.searchsorted(times, ts, side="right") - 1, 0, n - 2)
+        return _barycentric_batch(ts, x, w, vals, np.clip(i - 1, 0, n - 4))
+
+    return _vectorized(at, batch)
 
 
 _BUILDERS: dict[str, Callable[[np.ndarray, np.ndarray], Interpolant]] = {

@@ -288,3 +288,45 @@ def test_times_a_rounding_error_away_from_a_sample(scheme: str) -> None:
         for x in (ti + 5e-324, ti - 5e-324, math.nextafter(ti, math.inf), math.nextafter(ti, -math.inf)):
             if t[0] <= x <= t[-1]:
                 np.testing.assert_allclose(f(x), values[i], rtol=1e-12, atol=1e-12)
+
+
+# --- many times in one call ---------------------------------------------------------------------------
+
+
+def _probe_times(grid: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """Every sample time, its float neighbours, midpoints, random inner times, and times outside the grid."""
+    span = grid[-1] - grid[0] if grid.size > 1 else 1.0
+    near = np.concatenate([np.nextafter(grid, np.inf), np.nextafter(grid, -np.inf)])
+    mids = 0.5 * (grid[1:] + grid[:-1])
+    inner = rng.uniform(grid[0], grid[-1], 60) if grid.size > 1 else grid
+    outside = np.concatenate([grid[0] - span * rng.uniform(0.0, 1.5, 8), grid[-1] + span * rng.uniform(0.0, 1.5, 8)])
+    ts = np.concatenate([grid, near, mids, inner, outside, grid[::-1]])
+    return rng.permutation(ts)  # unsorted, with repeats: each time is evaluated on its own
+
+
+@pytest.mark.parametrize("scheme", list(SCHEMES))
+@pytest.mark.parametrize("n", [1, 2, 3, 4, 5, 8])
+@pytest.mark.parametrize("uniform", [True, False])
+def test_an_array_of_times_gives_the_scalar_rows_bit_for_bit(scheme: str, n: int, uniform: bool) -> None:
+    rng = np.random.default_rng(1000 * n + uniform)
+    grid = np.linspace(3.0, 3.4, n) if uniform else np.sort(rng.uniform(-2.0, 5.0, n))
+    values = rng.normal(size=(n, 4)) * np.array([1.0, 1e-8, 1e6, 7e3])
+    f = Segment(grid, values).interpolant(scheme)
+    ts = _probe_times(grid, rng)
+    with np.errstate(all="ignore"):  # n = 8 lagrange far outside the grid: large, still finite
+        many = f(ts)
+        one_by_one = np.array([f(float(t)) for t in ts])
+    assert many.shape == (ts.size, 4)
+    assert many.tobytes() == one_by_one.tobytes()  # identical bits, signed zeros included
+    for i, t in enumerate(grid):  # the samples themselves, as a batch of one and inside the batch
+        assert f(np.array([t])).tobytes() == values[i : i + 1].tobytes()
+    np.testing.assert_array_equal(many[np.isin(ts, grid)], values[np.searchsorted(grid, ts[np.isin(ts, grid)])])
+
+
+@pytest.mark.parametrize("scheme", list(SCHEMES))
+def test_array_shapes(scheme: str) -> None:
+    f = Segment([0.0, 0.1, 0.2, 0.3, 0.4], np.arange(10.0).reshape(5, 2)).interpolant(scheme)
+    assert f(0.05).shape == (2,) and f(np.float64(0.05)).shape == (2,) and f(np.array(0.05)).shape == (2,)
+    assert f(np.array([0.05, 0.15, 0.3])).shape == (3, 2)
+    assert f(np.empty(0)).shape == (0, 2)
+    assert f([0.05, 0.35]).tobytes() == np.array([f(0.05), f(0.35)]).tobytes()
