@@ -20,28 +20,35 @@ def gauss_nodes(n_samples: int) -> tuple[np.ndarray, np.ndarray]:
     return 0.5 * (x + 1.0), 0.5 * w
 
 
-def integrate_once(f: Callable[[float], np.ndarray], times: np.ndarray, y0: np.ndarray) -> np.ndarray:
-    """y(t_i) = y0 + integral of f from t_0 to t_i, at every sample time (y' = u)."""
+def _nodes(times: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Every quadrature node of every sample step, (steps * p,), and the step lengths (steps,)."""
+    h = times[1:] - times[:-1]
+    return (times[:-1, None] + h[:, None] * x[None, :]).ravel(), h
+
+
+def integrate_once(f: Callable[[np.ndarray], np.ndarray], times: np.ndarray, y0: np.ndarray) -> np.ndarray:
+    """y(t_i) = y0 + integral of f from t_0 to t_i, at every sample time (y' = u).
+
+    ``f`` takes all the quadrature nodes at once, (k,) -> (k, size): one input evaluation per interval."""
     x, w = gauss_nodes(times.size)
-    y = np.empty((times.size, y0.size))
-    y[0] = y0
-    for i in range(times.size - 1):
-        a, h = times[i], times[i + 1] - times[i]
-        y[i + 1] = y[i] + h * sum(wk * f(a + h * xk) for xk, wk in zip(x, w))
-    return y
+    ts, h = _nodes(times, x)
+    fs = f(ts).reshape(h.size, x.size, -1)
+    steps = h[:, None] * np.einsum("k,skm->sm", w, fs)
+    return np.cumsum(np.vstack([y0[None, :], steps]), axis=0)  # y[i+1] = y[i] + step i, in order
 
 
 def integrate_twice(
-    f: Callable[[float], np.ndarray], times: np.ndarray, y0: np.ndarray, v0: np.ndarray
+    f: Callable[[np.ndarray], np.ndarray], times: np.ndarray, y0: np.ndarray, v0: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """y'' = u: v = v0 + int u, y = y0 + v0 (t - t0) + int (t - s) u(s) ds, per step."""
     x, w = gauss_nodes(times.size + 1)
-    y = np.empty((times.size, y0.size))
-    v = np.empty_like(y)
-    y[0], v[0] = y0, v0
-    for i in range(times.size - 1):
-        a, h = times[i], times[i + 1] - times[i]
-        fs = [f(a + h * xk) for xk in x]
-        v[i + 1] = v[i] + h * sum(wk * fk for wk, fk in zip(w, fs))
-        y[i + 1] = y[i] + h * v[i] + h * h * sum(wk * (1.0 - xk) * fk for xk, wk, fk in zip(x, w, fs))
+    ts, h = _nodes(times, x)
+    fs = f(ts).reshape(h.size, x.size, -1)
+    dv = h[:, None] * np.einsum("k,skm->sm", w, fs)
+    moment = (h * h)[:, None] * np.einsum("k,skm->sm", w * (1.0 - x), fs)
+    v = np.cumsum(np.vstack([v0[None, :], dv]), axis=0)
+    y = np.empty_like(v)
+    y[0] = y0
+    for i in range(h.size):
+        y[i + 1] = y[i] + h[i] * v[i] + moment[i]
     return y, v
