@@ -380,7 +380,8 @@ class Instance:
             return
         _, terminate, early, _ = self.call(f"fmi3DoStep at t={t!r}", self._fmu.doStep, t, h, False)
         if terminate or early:
-            raise FmiCallError(f"fmi3DoStep at t={t!r}: the FMU {'asked to terminate' if terminate else 'returned early'}")
+            why = "asked to terminate" if terminate else "returned early"
+            raise FmiCallError(f"fmi3DoStep at t={t!r}: the FMU {why}")
 
     # --- model exchange
     def set_time(self, t: float) -> None:
