@@ -75,6 +75,9 @@ def load_model(path: str) -> type[Subsim]:
 
 def load(path: str | Path) -> Scenario:
     path = Path(path)
+    if path.suffix.lower() == ".ssp":  # SSP import: subsims/fmu/ssp.py (needs the fmi extra)
+        from subsims.fmu.ssp import read_ssp
+        return parse(read_ssp(path), path)
     try:
         raw = tomllib.loads(path.read_text())
     except FileNotFoundError:
@@ -117,6 +120,9 @@ def parse(raw: Mapping[str, Any], path: Path) -> Scenario:
             raise fail(key, str(exc)) from None
         if not isinstance(spec, dict):
             raise fail(key, "must be a table")
+        if "fmu" in spec:  # shorthand: fmu = "path.fmu" (subsims/fmu/ssp.py)
+            from subsims.fmu.ssp import expand_fmu
+            spec = expand_fmu(spec, path, start, key)
         unknown(spec, SUBSIM_KEYS, key)
         external = spec.get("external", False)
         if not isinstance(external, bool):

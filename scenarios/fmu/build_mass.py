@@ -1,4 +1,6 @@
-"""Build the test FMUs from C with gcc against FMPy's FMI headers (no downloads).
+"""Build the mass FMUs from C with gcc against FMPy's FMI headers (no downloads).
+
+    python scenarios/fmu/build_mass.py          # mass2.fmu (FMI 2.0) and mass3.fmu (FMI 3.0) beside this file
 
 ``build_mass_fmu(dir, version=2|3, state=True)`` gives ``mass.fmu``: one mass on a spring to ground
 driven by a force input (``csrc/mass_core.h``), co-simulation and model exchange in one binary.
@@ -8,6 +10,7 @@ model does not implement are generated as stubs that return ``fmiError``.
 
 from __future__ import annotations
 
+import argparse
 import re
 import subprocess
 import zipfile
@@ -129,3 +132,16 @@ def build_mass_fmu(out: Path, version: int = 2, state: bool = True, name: str | 
     name = name or f"mass{version}{'' if state else '_nostate'}"
     so = compile_binary(out / f"build-{name}", version, state)
     return write_fmu(out / f"{name}.fmu", model_description(version, state), {PLATFORM[version]: so})
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description="Build mass2.fmu and mass3.fmu (needs gcc and fmpy).")
+    p.add_argument("--out", type=Path, default=Path(__file__).parent, help="directory for the FMUs")
+    args = p.parse_args(argv)
+    for version in (2, 3):
+        print(build_mass_fmu(args.out, version))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
