@@ -23,7 +23,8 @@ import numpy as np
 
 try:
     import fmpy
-    from fmpy.fmi1 import FMICallException
+    import fmpy.fmi2
+    import fmpy.fmi3
     from fmpy.model_description import read_model_description
 except ImportError:  # pragma: no cover - the fmi extra is not installed
     fmpy = None
@@ -282,9 +283,7 @@ class Instance:
     def call(self, what: str, fn: Any, *args: Any) -> Any:
         try:
             return fn(*args)
-        except FMICallException as exc:
-            raise FmiCallError(f"{what}: {self._why(exc)}") from None
-        except Exception as exc:
+        except Exception as exc:  # FMPy raises FMICallException for a failed call, Exception for others
             raise FmiCallError(f"{what}: {self._why(exc)}") from None
 
     # --- life cycle

@@ -236,3 +236,32 @@ def test_bad_fmu_does_not_crash_a_served_subsim(fmus: dict[str, Path], cosim_bus
     assert "no binary for this platform" in err.value.message
     desc = handle.configure({"fmu": str(fmus["mass2"]), "u0": 1.0})
     assert list(desc.outputs) == ["u", "v"]
+
+
+def test_python_m_subsims_fmu_serves_the_fmu_given_on_the_command_line(fmus: dict[str, Path], cosim_bus) -> None:
+    """``python -m subsims.fmu mass3.fmu --connect EP --run RUN --name m1``: the ports are known before
+    configure, and configure needs no ``fmu`` parameter."""
+    cmd = [sys.executable, "-m", "subsims.fmu", str(fmus["mass3"]), "--connect", cosim_bus.endpoint,
+           "--run", cosim_bus.run, "--name", "m1"]
+    proc = subprocess.Popen(cmd, env=dict(os.environ))
+    handle = None
+    try:
+        handle = cosim_bus.attach("m1", timeout=30.0, wait=30.0)
+        desc = handle.describe()
+        assert list(desc.inputs) == ["F"] and desc.outputs["u"].unit == "m"
+        handle.configure({"m": M, "k": KS, "u0": 0.25})
+        t = np.linspace(0.0, 0.1, 5)
+        out = handle.run_interval(t, {"F": np.full((5, 1), 4.0)}).outputs["u"][:, 0]
+        np.testing.assert_allclose(out, forced(t, 0.25, 0.0, 4.0, 0.0), atol=1e-13)
+        handle.shutdown()
+        assert proc.wait(20) == 0
+    finally:
+        if handle is not None:
+            handle.close()
+        if proc.poll() is None:
+            proc.terminate()
+            try:
+                proc.wait(5)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
