@@ -272,7 +272,6 @@ class FmuSubsim(Subsim):
     def _advance_me(self, inst: Instance, times: np.ndarray, u: InputFunction) -> np.ndarray:
         n = self.info.n_states
         t0, t1 = float(times[0]), float(times[-1])
-        x0 = inst.get_states(n)
 
         def rhs(t: float, x: np.ndarray) -> np.ndarray:
             inst.set_time(t)
@@ -280,21 +279,26 @@ class FmuSubsim(Subsim):
             inst.set_states(x)
             return inst.get_derivatives(n)
 
-        try:
-            sol = solve_ivp(rhs, (t0, t1), x0, method=self.solver, t_eval=times, rtol=self.rtol, atol=self.atol,
-                            max_step=self.max_step)
-        except FmiCallError:
-            raise
-        except Exception as exc:  # an FMI call inside the right-hand side failed
-            raise FmiCallError(f"model exchange right-hand side: {inst._why(exc)}") from None
-        if not sol.success:
-            raise ModelError(f"solve_ivp ({self.solver}) failed: {sol.message}")
+        if n == 0:  # no continuous states: outputs are functions of time and inputs
+            states = np.zeros((0, times.size))
+        else:
+            try:
+                sol = solve_ivp(rhs, (t0, t1), inst.get_states(n), method=self.solver, t_eval=times,
+                                rtol=self.rtol, atol=self.atol, max_step=self.max_step)
+            except FmiCallError:
+                raise
+            except Exception as exc:  # an FMI call inside the right-hand side failed
+                raise FmiCallError(f"model exchange right-hand side: {inst._why(exc)}") from None
+            if not sol.success:
+                raise ModelError(f"solve_ivp ({self.solver}) failed: {sol.message}")
+            states = sol.y
         inputs = self._input_matrix(u, np.asarray(times, dtype=np.float64))
         out = np.empty((times.size, len(self._out_vrs)))
         for i, t in enumerate(times):
             inst.set_time(float(t))
             inst.set_reals(self._in_vrs, inputs[i])
-            inst.set_states(sol.y[:, i])
+            if n:
+                inst.set_states(states[:, i])
             out[i] = inst.get_reals(self._out_vrs)
         if inst.completed_step():
             raise ModelError(f"the FMU asks for event handling at t={t1!r}; model exchange events are not supported "
