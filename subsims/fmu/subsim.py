@@ -92,7 +92,8 @@ def _free(holder: list) -> None:
 
 class FmuSubsim(Subsim):
     """One FMU as a subsim. ``FmuSubsim("model.fmu")`` reads the FMU at once (its ports are known before
-    ``configure``); ``FmuSubsim()`` takes the path from ``params["fmu"]``."""
+    ``configure``) and serves that file, whatever directory ``params["fmu"]`` names (an external subsim on
+    another machine gets the coordinator's path); ``FmuSubsim()`` takes the path from ``params["fmu"]``."""
 
     name = "fmu"
 
@@ -137,7 +138,13 @@ class FmuSubsim(Subsim):
             raise ValueError("fmu: the path of the .fmu file is required")
         if not isinstance(path, (str, Path)):
             raise ValueError(f"fmu must be a path, got {path!r}")
-        info = self.info if self.info is not None and Path(path) == self.fmu_path else read_fmu(path)
+        if self.info is not None and self.fmu_path is not None:  # started with a path: that FMU is served
+            if Path(path).name != self.fmu_path.name:
+                raise ValueError(f"this subsim serves {self.fmu_path.name} (given when it started); params.fmu "
+                                 f"names {Path(path).name}")
+            info = self.info  # params.fmu may be the coordinator's path of the same file (external subsims)
+        else:
+            info = read_fmu(path)
         kind = params.get("interface", "cs" if "cs" in info.identifiers else "me")
         if kind not in info.identifiers:
             offered = ", ".join(f"{k!r}" for k in sorted(info.identifiers))

@@ -265,3 +265,14 @@ def test_python_m_subsims_fmu_serves_the_fmu_given_on_the_command_line(fmus: dic
             except subprocess.TimeoutExpired:
                 proc.kill()
                 proc.wait()
+
+
+def test_a_subsim_started_with_its_fmu_serves_that_file(fmus: dict[str, Path]) -> None:
+    """An external subsim started as ``python -m subsims.fmu /here/mass2.fmu`` is configured with the
+    coordinator's path of the same file: the name must match, the directory is the subsim's own."""
+    rt = Runtime(FmuSubsim(fmus["mass2"]))
+    rt.configure({"fmu": "/on/the/coordinator/mass2.fmu", "u0": 1.0})
+    assert rt.model.info.path == fmus["mass2"].resolve()
+    with pytest.raises(CosimError) as err:
+        rt.configure({"fmu": str(fmus["mass3"])})
+    assert "this subsim serves mass2.fmu (given when it started); params.fmu names mass3.fmu" in err.value.message
