@@ -33,7 +33,8 @@ def _raise_stop(signum: int, frame: object) -> None:
     raise _Stop(signal.Signals(signum).name)
 
 
-def parse_args(model_cls: type[Subsim], argv: Sequence[str] | None) -> argparse.Namespace:
+def parse_args(model_cls: type[Subsim] | Subsim, argv: Sequence[str] | None) -> argparse.Namespace:
+    model_cls = model_cls if isinstance(model_cls, type) else type(model_cls)  # a class or a prototype instance
     p = argparse.ArgumentParser(
         prog=f"python -m {model_cls.__module__.rsplit('.', 1)[0]}",
         description=f"Serve the {model_cls.__name__} subsim over Zenoh.",
@@ -72,7 +73,7 @@ def _watch_router(session: zenoh.Session, grace: float = 2.0) -> None:
             return
 
 
-def main(model_cls: type[Subsim], argv: Sequence[str] | None = None) -> int:
+def main(model_cls: type[Subsim] | Subsim, argv: Sequence[str] | None = None) -> int:
     args = parse_args(model_cls, argv)
     runtime = Runtime(model_cls, name=args.name, history_limit=args.history)
     signal.signal(signal.SIGTERM, _raise_stop)

@@ -12,6 +12,7 @@ from __future__ import annotations
 import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
+from importlib.metadata import entry_points
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any
@@ -50,6 +51,8 @@ KEYS: dict[str, dict[str, Key]] = {
                         "true: not launched; cosim run prints the command to start it and waits for it"),
         "params": Key("table", "{}", "", "parameters passed to the model's initial_state (the model's own keys)"),
         "doc": Key("string", '""', "", "free text"),
+        "fmu": Key("string", "none", "", "an FMU file instead of model (relative to the scenario file; needs the fmi "
+                   "extra): stands for model = 'subsims.fmu:FmuSubsim' with params.fmu = the path (docs/fmi.md)"),
     },
     "couplings[]": {
         "to": Key("string", "required", "", "the input driven, 'subsim.port'"),
@@ -152,8 +155,18 @@ class Scenario:
         return self.settings[method]
 
 
+def _plugins(group: str) -> dict[str, Any]:
+    """Entry points of ``group`` by name (other packages extend the loader without the loader importing them)."""
+    return {ep.name: ep for ep in entry_points(group=group)}
+
+
 def load(path: str | Path) -> Scenario:
+    """A scenario file: TOML, or a format a package registers under the ``cosim.formats`` entry points (.ssp)."""
     path = Path(path)
+    formats = _plugins("cosim.formats")
+    suffix = path.suffix.lower().lstrip(".")
+    if suffix != "toml" and suffix in formats:
+        return parse(formats[suffix].load()(path), path)
     try:
         raw = tomllib.loads(path.read_text())
     except FileNotFoundError:
@@ -167,7 +180,7 @@ def parse(raw: Mapping[str, Any], path: Path) -> Scenario:
     """Check every table of ``raw`` (a parsed scenario file) and build the scenario."""
     p = _Parser(path)
     p.known(raw, set(KEYS[""]) | TABLES, "top level")
-    start = p.number(raw, "start", 0.0)
+    start = p.start = p.number(raw, "start", 0.0)
     stop = p.number(raw, "stop")
     if stop <= start:
         raise p.fail("stop", f"must be after start ({start}), got {stop}")
@@ -190,6 +203,8 @@ class _Parser:
 
     def __init__(self, path: Path) -> None:
         self.path = path
+        self.start = 0.0
+        self.shorthands = _plugins("cosim.subsim_shorthands")
 
     def fail(self, key: str, msg: str) -> ScenarioError:
         return ScenarioError(f"{self.path}: [{key}] {msg}")
@@ -233,6 +248,9 @@ class _Parser:
             raise self.fail(key, str(exc)) from None
         if not isinstance(spec, dict):
             raise self.fail(key, "must be a table")
+        for short, expander in self.shorthands.items():  # e.g. fmu = "path.fmu" (subsims/fmu)
+            if short in spec:
+                spec = expander.load()(spec, self.path, self.start, key)
         self.known(spec, set(KEYS["subsims.<name>"]), key)
         external = spec.get("external", False)
         if not isinstance(external, bool):

@@ -1,0 +1,408 @@
+"""Reading an FMU and driving one instance of it through FMPy: the FMI side of the FMU subsim.
+
+Everything here is FMI: the model description (:func:`read_fmu`), the settable variables, and
+:class:`Instance`, one instantiated FMU with the few calls the subsim needs, the same for FMI 2.0 and
+3.0, co-simulation (CS) and model exchange (ME). Every failure is an :class:`FmuError` (a bad file or
+a bad value, before anything runs) or an :class:`FmiCallError` (a call the FMU refused while running),
+with a one-line message.
+"""
+
+from __future__ import annotations
+
+import atexit
+import ctypes
+import os
+import shutil
+import tempfile
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+try:
+    import fmpy
+    import fmpy.fmi2
+    import fmpy.fmi3
+    from fmpy.model_description import read_model_description
+except ImportError:  # pragma: no cover - the fmi extra is not installed
+    fmpy = None
+
+INTERFACES = {"cs": "coSimulation", "me": "modelExchange"}
+REAL_TYPES = {"Real", "Float64", "Float32"}
+INT_TYPES = {"Integer", "Enumeration", "Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32", "Int64", "UInt64"}
+
+
+class FmuError(ValueError):
+    """The FMU file, its description, or a value given for it is unusable; one line, naming the file."""
+
+
+class FmiCallError(RuntimeError):
+    """An FMI call failed while the FMU ran (the FMU's own last log message is appended when it gave one)."""
+
+
+def require_fmpy() -> None:
+    if fmpy is None:
+        raise FmuError("FMU support needs FMPy: pip install 'cosim[fmi]' (or pip install fmpy)")
+
+
+@dataclass(frozen=True)
+class Variable:
+    """One scalar model variable as the subsim uses it."""
+
+    name: str
+    vr: int
+    type: str
+    causality: str
+    variability: str
+    initial: str | None
+    start: str | None
+    unit: str
+    description: str
+
+
+@dataclass(frozen=True)
+class FmuInfo:
+    """What the subsim needs from ``modelDescription.xml``."""
+
+    path: Path
+    fmi_version: str  # "2.0" or "3.0"
+    model_name: str
+    token: str  # FMI 2 guid / FMI 3 instantiationToken
+    identifiers: dict[str, str]  # interface ("cs", "me") -> modelIdentifier, only those with a binary here
+    can_serialize: dict[str, bool]  # interface -> canSerializeFMUstate
+    inputs: tuple[Variable, ...]  # real scalar inputs
+    outputs: tuple[Variable, ...]  # real scalar outputs
+    settable: dict[str, Variable]  # name -> variable that configure may set (parameters, start values)
+    n_states: int
+    n_event_indicators: int
+
+    @property
+    def major(self) -> int:
+        return int(self.fmi_version.split(".")[0])
+
+    def summary(self) -> dict[str, Any]:
+        """The FMU's metadata as plain data (what ``python -m subsims.fmu X.fmu --describe`` prints)."""
+        return {
+            "fmu": str(self.path),
+            "model": self.model_name,
+            "fmi_version": self.fmi_version,
+            "interfaces": sorted(self.identifiers),
+            "can_save_state": {k: self.can_serialize[k] for k in sorted(self.identifiers)},
+            "inputs": {v.name: v.unit for v in self.inputs},
+            "outputs": {v.name: v.unit for v in self.outputs},
+            "parameters": {v.name: v.start for v in self.settable.values()},
+        }
+
+
+def _one_line(exc: BaseException) -> str:
+    text = " ".join(str(exc).split())
+    return text[:300] or type(exc).__name__
+
+
+def _platform(major: int) -> str:
+    return fmpy.platform if major == 2 else fmpy.platform_tuple
+
+
+def _settable(v: Any, major: int) -> bool:
+    if v.dimensions or v.type in {"Binary", "Clock"} or v.variability == "constant":
+        return False
+    if v.causality == "input":
+        return v.type not in REAL_TYPES  # real inputs are ports, driven by the coupling
+    if v.causality in {"parameter"}:
+        return True
+    return v.start is not None and v.initial in {"exact", "approx"} and v.causality in {"local", "output"}
+
+
+def read_fmu(path: str | os.PathLike) -> FmuInfo:
+    """Read and check an FMU file: a zip with a valid FMI 2.0/3.0 description and a binary for this platform."""
+    require_fmpy()
+    path = Path(path)
+    if not path.is_file():
+        raise FmuError(f"{path}: no such FMU file")
+    if not zipfile.is_zipfile(path):
+        raise FmuError(f"{path}: not an FMU (not a zip archive)")
+    try:
+        with zipfile.ZipFile(path) as zf:
+            names = set(zf.namelist())
+    except (zipfile.BadZipFile, OSError) as exc:
+        raise FmuError(f"{path}: unreadable zip archive ({_one_line(exc)})") from None
+    if "modelDescription.xml" not in names:
+        raise FmuError(f"{path}: not an FMU (no modelDescription.xml in the archive)")
+    try:
+        md = read_model_description(str(path), validate=True)
+    except Exception as exc:
+        raise FmuError(f"{path}: invalid modelDescription.xml: {_one_line(exc)}") from None
+    if md.fmiVersion not in {"2.0", "3.0"}:
+        raise FmuError(f"{path}: FMI {md.fmiVersion} is not supported (FMI 2.0 and 3.0 are)")
+    major = int(md.fmiVersion[0])
+    platform = _platform(major)
+    offered: dict[str, str] = {}
+    for key, attr in INTERFACES.items():
+        interface = getattr(md, attr)
+        if interface is not None:
+            offered[key] = interface.modelIdentifier
+    if not offered:
+        raise FmuError(f"{path}: offers neither co-simulation nor model exchange")
+    ext = fmpy.sharedLibraryExtension
+    identifiers = {k: i for k, i in offered.items() if f"binaries/{platform}/{i}{ext}" in names}
+    if not identifiers:
+        have = sorted({n.split("/")[1] for n in names if n.startswith("binaries/") and n.count("/") >= 2})
+        wanted = ", ".join(f"binaries/{platform}/{i}{ext}" for i in sorted(set(offered.values())))
+        if have:
+            raise FmuError(f"{path}: no binary for this platform ({wanted} missing; the FMU has binaries for "
+                           f"{', '.join(have)})")
+        raise FmuError(f"{path}: the FMU has no binaries ({wanted} missing; a source-only FMU must be compiled "
+                       "first, e.g. with fmpy.util.compile_platform_binary)")
+    variables = [v for v in md.modelVariables if not v.dimensions]
+    by_causality = lambda c: tuple(  # noqa: E731
+        Variable(v.name, v.valueReference, v.type, v.causality, v.variability, v.initial, v.start,
+                 v.unit or (v.declaredType.unit if v.declaredType is not None else None) or "", v.description or "")
+        for v in variables if v.causality == c and v.type in REAL_TYPES
+    )
+    settable = {
+        v.name: Variable(v.name, v.valueReference, v.type, v.causality, v.variability, v.initial, v.start,
+                         v.unit or "", v.description or "")
+        for v in md.modelVariables if _settable(v, major)
+    }
+    return FmuInfo(
+        path=path.resolve(),
+        fmi_version=md.fmiVersion,
+        model_name=md.modelName or path.stem,
+        token=md.guid or "",
+        identifiers=identifiers,
+        can_serialize={k: bool(getattr(md, INTERFACES[k]).canSerializeFMUstate) for k in identifiers},
+        inputs=by_causality("input"),
+        outputs=by_causality("output"),
+        settable=settable,
+        n_states=int(md.numberOfContinuousStates or 0),
+        n_event_indicators=int(md.numberOfEventIndicators or 0),
+    )
+
+
+# --- extraction: one directory per FMU file and process, removed at exit ---------------------------
+
+_EXTRACTED: dict[tuple[str, int, int], str] = {}
+_TMP_ROOT: list[str] = []
+
+
+def extracted(info: FmuInfo) -> str:
+    st = info.path.stat()
+    key = (str(info.path), st.st_mtime_ns, st.st_size)
+    if key not in _EXTRACTED:
+        if not _TMP_ROOT:
+            _TMP_ROOT.append(tempfile.mkdtemp(prefix="cosim-fmu-"))
+            atexit.register(shutil.rmtree, _TMP_ROOT[0], True)
+        target = tempfile.mkdtemp(dir=_TMP_ROOT[0])
+        try:
+            fmpy.extract(str(info.path), target)
+        except Exception as exc:
+            raise FmuError(f"{info.path}: cannot extract ({_one_line(exc)})") from None
+        _EXTRACTED[key] = target
+    return _EXTRACTED[key]
+
+
+# --- values -------------------------------------------------------------------------------------------
+
+def coerce(var: Variable, value: Any) -> Any:
+    """``value`` as the Python type the FMU variable takes; FmuError naming the variable otherwise."""
+    if var.type in REAL_TYPES:
+        ok = isinstance(value, (int, float)) and not isinstance(value, bool) and np.isfinite(value)
+        if ok:
+            return float(value)
+        raise FmuError(f"{var.name} is {var.type}: needs a finite number, got {value!r}")
+    if var.type in INT_TYPES:
+        if isinstance(value, int) and not isinstance(value, bool):
+            return value
+        raise FmuError(f"{var.name} is {var.type}: needs an integer, got {value!r}")
+    if var.type == "Boolean":
+        if isinstance(value, bool):
+            return value
+        raise FmuError(f"{var.name} is Boolean: needs true or false, got {value!r}")
+    if var.type == "String":
+        if isinstance(value, str):
+            return value
+        raise FmuError(f"{var.name} is String: needs a string, got {value!r}")
+    raise FmuError(f"{var.name}: variables of type {var.type} cannot be set")
+
+
+# --- one instance ---------------------------------------------------------------------------------------
+
+class Instance:
+    """One instantiated FMU (``kind`` "cs" or "me"), initialized at ``t0`` with ``values`` set first."""
+
+    def __init__(self, info: FmuInfo, kind: str, name: str) -> None:
+        self.info, self.kind, self.major = info, kind, info.major
+        self.last_message = ""
+        self._fmu: Any = None
+        unzip = extracted(info)
+        cls = {(2, "cs"): fmpy.fmi2.FMU2Slave, (2, "me"): fmpy.fmi2.FMU2Model,
+               (3, "cs"): fmpy.fmi3.FMU3Slave, (3, "me"): fmpy.fmi3.FMU3Model}[(self.major, kind)]
+        try:
+            fmu = cls(guid=info.token, unzipDirectory=unzip, modelIdentifier=info.identifiers[kind],
+                      instanceName=name)
+        except Exception as exc:
+            raise FmuError(f"{info.path}: cannot load the binary ({_one_line(exc)})") from None
+        self._fmu = fmu
+        self._keep: list[Any] = []
+        try:
+            if self.major == 2:
+                callbacks = fmpy.fmi2.fmi2CallbackFunctions()
+                callbacks.logger = fmpy.fmi2.fmi2CallbackLoggerTYPE(self._log2)
+                callbacks.allocateMemory = fmpy.fmi2.fmi2CallbackAllocateMemoryTYPE(fmpy.calloc)
+                callbacks.freeMemory = fmpy.fmi2.fmi2CallbackFreeMemoryTYPE(fmpy.free)
+                from fmpy.logging import addLoggerProxy
+
+                addLoggerProxy(ctypes.byref(callbacks))
+                self._keep.append(callbacks)
+                fmu.instantiate(callbacks=callbacks)
+            else:
+                fmu.instantiate(logMessage=self._log3)
+        except Exception as exc:
+            self._fmu = None
+            raise FmuError(f"{info.path}: cannot instantiate ({self._why(exc)})") from None
+        self._ok = True
+
+    # FMU log callbacks: keep the last error/warning for error messages; the FMU's own log is not printed
+    def _log2(self, env: Any, instance: bytes, status: int, category: bytes, message: bytes) -> None:
+        if status >= 1:
+            self.last_message = message.decode("utf-8", "replace")
+
+    def _log3(self, env: Any, status: int, category: bytes, message: bytes) -> None:
+        if status >= 1:
+            self.last_message = message.decode("utf-8", "replace")
+
+    def _why(self, exc: BaseException) -> str:
+        msg = _one_line(exc).rstrip(".")
+        if self.last_message:
+            msg += f": {' '.join(self.last_message.split())[:200]}"
+            self.last_message = ""
+        return msg
+
+    def call(self, what: str, fn: Any, *args: Any) -> Any:
+        try:
+            return fn(*args)
+        except Exception as exc:  # FMPy raises FMICallException for a failed call, Exception for others
+            raise FmiCallError(f"{what}: {self._why(exc)}") from None
+
+    # --- life cycle
+    def initialize(self, values: dict[str, Any], t0: float, tolerance: float | None) -> None:
+        fmu = self._fmu
+        if self.major == 2:
+            self.call("fmi2SetupExperiment", fmu.setupExperiment, tolerance, t0)
+        for name, value in values.items():  # start values and fixed parameters before initialization
+            self.set_value(self.info.settable[name], value)
+        if self.major == 2:
+            self.call("fmi2EnterInitializationMode", fmu.enterInitializationMode)
+        else:
+            self.call("fmi3EnterInitializationMode", fmu.enterInitializationMode, tolerance, t0)
+        self.call("ExitInitializationMode", fmu.exitInitializationMode)
+        if self.kind == "me":
+            next_event = self._event_iteration()
+            if next_event is not None:
+                raise FmuError(f"{self.info.path}: model exchange: the FMU schedules a time event at "
+                               f"t={next_event!r}; events are not handled in model exchange (use its co-simulation "
+                               "interface)")
+            self.call("EnterContinuousTimeMode", fmu.enterContinuousTimeMode)
+
+    def _event_iteration(self) -> float | None:
+        fmu = self._fmu
+        for _ in range(1000):
+            if self.major == 2:
+                info = fmpy.fmi2.fmi2EventInfo()
+                self.call("fmi2NewDiscreteStates", fmu.fmi2NewDiscreteStates, fmu.component, ctypes.byref(info))
+                more, stop, timed, when = (info.newDiscreteStatesNeeded, info.terminateSimulation,
+                                           info.nextEventTimeDefined, info.nextEventTime)
+            else:
+                more, stop, _, _, timed, when = self.call("fmi3UpdateDiscreteStates", fmu.updateDiscreteStates)
+            if stop:
+                raise FmiCallError("the FMU asked to terminate during its event iteration")
+            if not more:
+                return float(when) if timed else None
+        raise FmiCallError("the FMU's event iteration did not settle in 1000 rounds")
+
+    def free(self) -> None:
+        fmu, self._fmu = self._fmu, None
+        if fmu is not None:
+            try:
+                fmu.terminate()
+            except Exception:
+                pass
+            try:
+                fmu.freeInstance()
+            except Exception:
+                pass
+
+    # --- values
+    def set_value(self, var: Variable, value: Any) -> None:
+        t = var.type
+        if self.major == 2:
+            setter = {"Real": "setReal", "Integer": "setInteger", "Enumeration": "setInteger",
+                      "Boolean": "setBoolean", "String": "setString"}[t]
+        else:
+            setter = "setInt64" if t == "Enumeration" else f"set{t}"
+        self.call(f"setting {var.name}", getattr(self._fmu, setter), [var.vr], [value])
+
+    def set_reals(self, vrs: list[int], values: np.ndarray) -> None:
+        if vrs:
+            setter = self._fmu.setReal if self.major == 2 else self._fmu.setFloat64
+            self.call("setting the inputs", setter, vrs, [float(x) for x in values])
+
+    def get_reals(self, vrs: list[int]) -> np.ndarray:
+        if not vrs:
+            return np.empty(0)
+        getter = self._fmu.getReal if self.major == 2 else self._fmu.getFloat64
+        return np.array(self.call("getting the outputs", getter, vrs), dtype=np.float64)
+
+    # --- state
+    def serialize(self) -> bytes:
+        fmu = self._fmu
+        state = self.call("GetFMUstate", fmu.getFMUState)
+        try:
+            return bytes(self.call("SerializeFMUstate", fmu.serializeFMUState, state))
+        finally:
+            self.call("FreeFMUstate", fmu.freeFMUState, state)
+
+    def restore(self, data: bytes) -> None:
+        fmu = self._fmu
+        state = self.call("DeSerializeFMUstate", fmu.deserializeFMUState, data)
+        try:
+            self.call("SetFMUstate", fmu.setFMUState, state)
+        finally:
+            self.call("FreeFMUstate", fmu.freeFMUState, state)
+
+    # --- co-simulation
+    def do_step(self, t: float, h: float) -> None:
+        if self.major == 2:
+            self.call(f"fmi2DoStep at t={t!r}", self._fmu.doStep, t, h, False)
+            return
+        _, terminate, early, _ = self.call(f"fmi3DoStep at t={t!r}", self._fmu.doStep, t, h, False)
+        if terminate or early:
+            why = "asked to terminate" if terminate else "returned early"
+            raise FmiCallError(f"fmi3DoStep at t={t!r}: the FMU {why}")
+
+    # --- model exchange
+    def set_time(self, t: float) -> None:
+        self._fmu.setTime(t)
+
+    def set_states(self, x: np.ndarray) -> None:
+        x = np.ascontiguousarray(x, dtype=np.float64)
+        self._fmu.setContinuousStates(x.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), x.size)
+
+    def get_states(self, n: int) -> np.ndarray:
+        x = np.zeros(n)
+        self.call("GetContinuousStates", self._fmu.getContinuousStates,
+                  x.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), n)
+        return x
+
+    def get_derivatives(self, n: int) -> np.ndarray:
+        dx = np.zeros(n)
+        get = self._fmu.getDerivatives if self.major == 2 else self._fmu.getContinuousStateDerivatives
+        get(dx.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), n)
+        return dx
+
+    def completed_step(self) -> bool:
+        """True when the FMU asks for event mode (not supported in model exchange)."""
+        enter, terminate = self.call("CompletedIntegratorStep", self._fmu.completedIntegratorStep, False)
+        return bool(enter or terminate)

@@ -1,0 +1,313 @@
+"""Any FMU (FMI 2.0 / 3.0, co-simulation or model exchange) as a cosim subsim.
+
+Ports: every real scalar input and output of the FMU, one port of width 1 each, named and united as in
+``modelDescription.xml`` (the variable's description is the port's doc).
+
+Parameters (``params`` of ``configure`` / a scenario's ``[subsims.<name>.params]``):
+
+- ``fmu``: path of the ``.fmu`` file (not needed when the subsim was started with the path);
+- ``interface``: ``"cs"`` (co-simulation, the default when the FMU has it) or ``"me"`` (model exchange);
+- ``substeps`` (CS, default 1): communication steps per sample interval; inputs are set from the
+  interpolated input segments at every communication point and held over the step;
+- ``solver`` (ME, default ``"DOP853"``), ``rtol`` (1e-10), ``atol`` (1e-12), ``max_step`` (none): the
+  scipy ``solve_ivp`` settings the subsim integrates a model-exchange FMU with;
+- ``start_time`` (0): the time the FMU is initialized at (the scenario's start; the ``fmu =`` shorthand
+  and SSP import set it);
+- ``tolerance``: the tolerance passed to the FMU's own solver (FMI ``setupExperiment``), if any;
+- ``state_capacity``: bytes reserved for the serialized FMU state (default: twice its size at start, at
+  least 1 KiB more);
+- ``values``: a table ``{variable name: value}`` of parameters and start values; any other key of
+  ``params`` is also taken as a variable name. Unknown names are refused with the list of known ones.
+
+State: the subsim's state vector *is* the FMU's serialized state (``fmi2SerializeFMUstate`` /
+``fmi3SerializeFMUState``): ``[MAGIC, byte count, 6 bytes per float ...]``, each float an integer below
+2**48 so that the vector is finite whatever the bytes. ``advance`` first restores the FMU from the vector,
+so it is pure, and the runtime's commit, rollback, ``get_state`` and ``set_state`` work unchanged. An FMU
+that cannot serialize its state is refused at ``configure`` (and at start-up when started with its path).
+"""
+
+from __future__ import annotations
+
+import copy
+import weakref
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from scipy.integrate import solve_ivp
+
+from cosim.subsim import InputFunction, ModelError, Port, Subsim
+from subsims.fmu.fmu import FmiCallError, FmuError, FmuInfo, Instance, coerce, read_fmu
+
+SETTINGS = {"fmu", "interface", "substeps", "solver", "rtol", "atol", "max_step", "tolerance", "state_capacity",
+            "start_time", "values"}
+MAGIC = 46_707_781.0  # first element of every FMU state vector
+BYTES_PER_FLOAT = 6
+SOLVERS = ("RK45", "RK23", "DOP853", "Radau", "BDF", "LSODA")
+
+
+def encode_state(data: bytes, capacity: int) -> np.ndarray:
+    """``[MAGIC, len(data), ...]``: the bytes padded to ``capacity``, 6 per float (exact integers < 2**48)."""
+    if len(data) > capacity:
+        raise ModelError(f"the FMU state grew to {len(data)} bytes, more than the {capacity} reserved at configure; "
+                         "set params.state_capacity higher")
+    groups = np.zeros((capacity // BYTES_PER_FLOAT, 8), dtype=np.uint8)
+    flat = np.frombuffer(data.ljust(capacity, b"\0"), dtype=np.uint8).reshape(-1, BYTES_PER_FLOAT)
+    groups[:, :BYTES_PER_FLOAT] = flat
+    return np.concatenate(([MAGIC, float(len(data))], groups.view("<u8").ravel().astype(np.float64)))
+
+
+def decode_state(state: np.ndarray) -> bytes:
+    """The bytes :func:`encode_state` packed; ValueError when ``state`` is not such a vector."""
+    s = np.asarray(state, dtype=np.float64)
+    if s.ndim != 1 or s.size < 2 or s[0] != MAGIC:
+        raise ValueError("not an FMU state vector (wrong marker)")
+    body = s[2:]
+    n = s[1]
+    if not (0 <= n <= body.size * BYTES_PER_FLOAT and n == int(n)):
+        raise ValueError(f"FMU state vector: byte count {n!r} does not fit its {body.size} floats")
+    if not np.all((body >= 0) & (body < 2.0**48) & (body == np.floor(body))):
+        raise ValueError("FMU state vector: its floats are not the integers it was packed with")
+    raw = body.astype("<u8").view(np.uint8).reshape(-1, 8)[:, :BYTES_PER_FLOAT]
+    return raw.tobytes()[: int(n)]
+
+
+def _capacity(size: int, given: Any) -> int:
+    if given is None:
+        cap = max(2 * size, size + 1024)
+    else:
+        if isinstance(given, bool) or not isinstance(given, int) or given < size:
+            raise ValueError(f"state_capacity must be an integer of at least {size} (the FMU state's size now), "
+                             f"got {given!r}")
+        cap = given
+    return -(-cap // BYTES_PER_FLOAT) * BYTES_PER_FLOAT
+
+
+def _free(holder: list) -> None:
+    if holder and holder[0] is not None:
+        holder[0].free()
+        holder[0] = None
+
+
+class FmuSubsim(Subsim):
+    """One FMU as a subsim. ``FmuSubsim("model.fmu")`` reads the FMU at once (its ports are known before
+    ``configure``) and serves that file, whatever directory ``params["fmu"]`` names (an external subsim on
+    another machine gets the coordinator's path); ``FmuSubsim()`` takes the path from ``params["fmu"]``."""
+
+    name = "fmu"
+
+    def __init__(self, fmu: str | Path | None = None) -> None:
+        self.fmu_path = None if fmu is None else Path(fmu)
+        self.info: FmuInfo | None = None
+        self.kind = "cs"
+        self._holder: list[Instance | None] = [None]
+        if self.fmu_path is not None:
+            self.info = read_fmu(self.fmu_path)
+            self.kind = "cs" if "cs" in self.info.identifiers else "me"
+            self._set_ports(self.info)
+            if not self.info.can_serialize[self.kind]:
+                raise FmuError(self._no_state_message(self.info, self.kind))
+
+    def __deepcopy__(self, memo: dict) -> FmuSubsim:
+        """A fresh, unconfigured copy (the runtime copies its prototype at every configure)."""
+        new = object.__new__(type(self))
+        new.fmu_path, new.info, new.kind, new._holder = self.fmu_path, self.info, self.kind, [None]
+        for attr in ("inputs", "outputs"):
+            if attr in self.__dict__:
+                setattr(new, attr, copy.copy(self.__dict__[attr]))
+        return new
+
+    @staticmethod
+    def _no_state_message(info: FmuInfo, kind: str) -> str:
+        flag = "canSerializeFMUstate" if info.major == 2 else "canSerializeFMUState"
+        return (f"{info.path.name}: the FMU cannot serialize its state ({flag} is false for "
+                f"{'co-simulation' if kind == 'cs' else 'model exchange'}); cosim needs it to re-run an interval "
+                "from the committed state, so this FMU is refused")
+
+    def _set_ports(self, info: FmuInfo) -> None:
+        self.inputs = {v.name: Port(1, v.unit, v.description) for v in info.inputs}
+        self.outputs = {v.name: Port(1, v.unit, v.description) for v in info.outputs}
+
+    # --- configure --------------------------------------------------------------------------------
+
+    def initial_state(self, params: Mapping[str, Any]) -> np.ndarray:
+        params = dict(params)
+        path = params.get("fmu", self.fmu_path)
+        if path is None:
+            raise ValueError("fmu: the path of the .fmu file is required")
+        if not isinstance(path, (str, Path)):
+            raise ValueError(f"fmu must be a path, got {path!r}")
+        if self.info is not None and self.fmu_path is not None:  # started with a path: that FMU is served
+            if Path(path).name != self.fmu_path.name:
+                raise ValueError(f"this subsim serves {self.fmu_path.name} (given when it started); params.fmu "
+                                 f"names {Path(path).name}")
+            info = self.info  # params.fmu may be the coordinator's path of the same file (external subsims)
+        else:
+            info = read_fmu(path)
+        kind = params.get("interface", "cs" if "cs" in info.identifiers else "me")
+        if kind not in info.identifiers:
+            offered = ", ".join(f"{k!r}" for k in sorted(info.identifiers))
+            raise ValueError(f"interface {kind!r} not available in {info.path.name}; it offers {offered}")
+        if not info.can_serialize[kind]:
+            raise ValueError(self._no_state_message(info, kind))
+        self.substeps = self._int(params.get("substeps", 1), "substeps")
+        self.solver = params.get("solver", "DOP853")
+        if self.solver not in SOLVERS:
+            raise ValueError(f"solver must be one of {', '.join(SOLVERS)}, got {self.solver!r}")
+        self.rtol = self._positive(params.get("rtol", 1e-10), "rtol")
+        self.atol = self._positive(params.get("atol", 1e-12), "atol")
+        max_step = params.get("max_step")
+        self.max_step = np.inf if max_step is None else self._positive(max_step, "max_step")
+        start_time = params.get("start_time", 0.0)
+        if isinstance(start_time, bool) or not isinstance(start_time, (int, float)) or not np.isfinite(start_time):
+            raise ValueError(f"start_time must be a finite number, got {start_time!r}")
+        tolerance = params.get("tolerance")
+        tolerance = None if tolerance is None else self._positive(tolerance, "tolerance")
+        values = self._values(info, params)
+        if kind == "me" and info.n_event_indicators:
+            raise ValueError(f"{info.path.name}: model exchange with event indicators ({info.n_event_indicators}) "
+                             "is not supported (use interface = 'cs')")
+        self.info, self.kind, self.fmu_path = info, kind, info.path
+        self._set_ports(info)
+        self._in_vrs = [v.vr for v in info.inputs]
+        self._out_vrs = [v.vr for v in info.outputs]
+        _free(self._holder)
+        try:
+            inst = Instance(info, kind, self.name)
+        except FmiCallError as exc:
+            raise ValueError(str(exc)) from None
+        self._holder[0] = inst
+        weakref.finalize(self, _free, self._holder)
+        try:
+            inst.initialize(values, start_time, tolerance)
+            data = inst.serialize()
+        except FmiCallError as exc:
+            _free(self._holder)
+            raise ValueError(f"{info.path.name}: initialization failed: {exc}") from None
+        except FmuError:
+            _free(self._holder)
+            raise
+        self.capacity = _capacity(len(data), params.get("state_capacity"))
+        return encode_state(data, self.capacity)
+
+    @staticmethod
+    def _int(value: Any, what: str) -> int:
+        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+            raise ValueError(f"{what} must be a positive integer, got {value!r}")
+        return value
+
+    @staticmethod
+    def _positive(value: Any, what: str) -> float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not value > 0 or not np.isfinite(value):
+            raise ValueError(f"{what} must be a positive number, got {value!r}")
+        return float(value)
+
+    @staticmethod
+    def _values(info: FmuInfo, params: Mapping[str, Any]) -> dict[str, Any]:
+        given = {k: v for k, v in params.items() if k not in SETTINGS}
+        table = params.get("values", {})
+        if not isinstance(table, Mapping):
+            raise ValueError(f"values must be a table of variable name -> value, got {table!r}")
+        both = sorted(set(given) & set(table))
+        if both:
+            raise ValueError(f"{both} given both in params and in params.values")
+        given.update(table)
+        unknown = sorted(k for k in given if k not in info.settable)
+        if unknown:
+            known = ", ".join(sorted(info.settable)) or "none"
+            raise ValueError(f"unknown FMU variable(s) {unknown} in {info.path.name}; settable: {known} "
+                             f"(subsim settings: {', '.join(sorted(SETTINGS))})")
+        return {k: coerce(info.settable[k], v) for k, v in given.items()}
+
+    # --- advance ----------------------------------------------------------------------------------
+
+    def advance(self, state: np.ndarray, times: np.ndarray, u: InputFunction) -> tuple[dict, np.ndarray]:
+        inst = self._holder[0]
+        if inst is None:
+            raise ModelError("the FMU is not instantiated (configure failed?)")
+        try:
+            data = decode_state(state)
+        except ValueError as exc:
+            raise ModelError(str(exc)) from None
+        try:
+            inst.restore(data)
+            if self.kind == "cs":
+                outputs = self._advance_cs(inst, times, u)
+            else:
+                outputs = self._advance_me(inst, times, u)
+            end = inst.serialize()
+        except FmiCallError as exc:
+            raise ModelError(str(exc)) from None
+        names = [v.name for v in self.info.outputs]
+        return {n: outputs[:, i : i + 1] for i, n in enumerate(names)}, encode_state(end, self.capacity)
+
+    def _input_matrix(self, u: InputFunction, points: np.ndarray) -> np.ndarray:
+        """Inputs at ``points`` (k,), one column per FMU input: one call of ``u`` on the array of times where
+        the runtime supports it, else one call per point (the subsim API documents both)."""
+        if not self._in_vrs:
+            return np.zeros((points.size, 0))
+        names = [v.name for v in self.info.inputs]
+        try:
+            values = u(points)
+            cols = [np.asarray(values[n], dtype=np.float64) for n in names]
+            if all(c.shape == (points.size, 1) for c in cols):
+                return np.hstack(cols)
+        except (TypeError, ValueError, IndexError):
+            pass
+        rows = [u(float(t)) for t in points]
+        return np.array([[float(np.asarray(r[n]).reshape(-1)[0]) for n in names] for r in rows])
+
+    def _advance_cs(self, inst: Instance, times: np.ndarray, u: InputFunction) -> np.ndarray:
+        m = self.substeps
+        if m == 1:
+            points = np.asarray(times, dtype=np.float64)
+        else:
+            fine = [np.linspace(a, b, m + 1)[:-1] for a, b in zip(times[:-1], times[1:])]
+            points = np.concatenate([*fine, times[-1:]])
+        inputs = self._input_matrix(u, points)
+        out = np.empty((times.size, len(self._out_vrs)))
+        for j in range(points.size - 1):
+            inst.set_reals(self._in_vrs, inputs[j])
+            if j % m == 0:
+                out[j // m] = inst.get_reals(self._out_vrs)
+            inst.do_step(float(points[j]), float(points[j + 1] - points[j]))
+        inst.set_reals(self._in_vrs, inputs[-1])
+        out[-1] = inst.get_reals(self._out_vrs)
+        return out
+
+    def _advance_me(self, inst: Instance, times: np.ndarray, u: InputFunction) -> np.ndarray:
+        n = self.info.n_states
+        t0, t1 = float(times[0]), float(times[-1])
+
+        def rhs(t: float, x: np.ndarray) -> np.ndarray:
+            inst.set_time(t)
+            inst.set_reals(self._in_vrs, self._input_matrix(u, np.array([t]))[0])
+            inst.set_states(x)
+            return inst.get_derivatives(n)
+
+        if n == 0:  # no continuous states: outputs are functions of time and inputs
+            states = np.zeros((0, times.size))
+        else:
+            try:
+                sol = solve_ivp(rhs, (t0, t1), inst.get_states(n), method=self.solver, t_eval=times,
+                                rtol=self.rtol, atol=self.atol, max_step=self.max_step)
+            except FmiCallError:
+                raise
+            except Exception as exc:  # an FMI call inside the right-hand side failed
+                raise FmiCallError(f"model exchange right-hand side: {inst._why(exc)}") from None
+            if not sol.success:
+                raise ModelError(f"solve_ivp ({self.solver}) failed: {sol.message}")
+            states = sol.y
+        inputs = self._input_matrix(u, np.asarray(times, dtype=np.float64))
+        out = np.empty((times.size, len(self._out_vrs)))
+        for i, t in enumerate(times):
+            inst.set_time(float(t))
+            inst.set_reals(self._in_vrs, inputs[i])
+            if n:
+                inst.set_states(states[:, i])
+            out[i] = inst.get_reals(self._out_vrs)
+        if inst.completed_step():
+            raise ModelError(f"the FMU asks for event handling at t={t1!r}; model exchange events are not supported "
+                             "(use interface = 'cs')")
+        return out

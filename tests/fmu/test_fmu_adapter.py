@@ -1,0 +1,278 @@
+"""The FMU subsim on one FMU, in process: ports, configure, CS and ME stepping, state, refusals.
+
+Expected values are closed-form solutions of the test FMU's model, m u'' = -k u + F (conftest builds it
+from scenarios/fmu/csrc), never outputs of the code under test.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cosim.contract import CosimError
+from cosim.runtime import Runtime
+from cosim.subsim import ModelError
+from subsims.fmu import FmuSubsim
+from subsims.fmu.fmu import FmuError, read_fmu
+from subsims.fmu.subsim import MAGIC, decode_state, encode_state
+
+M, KS = 2.0, 50.0  # a mass and spring different from every default
+W = np.sqrt(KS / M)
+
+
+def forced(t: np.ndarray, u0: float, v0: float, a: float, b: float) -> np.ndarray:
+    """Closed form of m u'' + k u = a + b t: particular (a + b t) / k plus the free oscillation."""
+    return (a + b * t) / KS + (u0 - a / KS) * np.cos(W * t) + (v0 - b / KS) / W * np.sin(W * t)
+
+
+def configured(path: Path, **params) -> Runtime:
+    rt = Runtime(FmuSubsim)
+    rt.configure({"fmu": str(path), "m": M, "k": KS, **params}, 0.0)
+    return rt
+
+
+def run(rt: Runtime, t: np.ndarray, force: np.ndarray, commit: bool = False) -> dict:
+    return rt.run_interval(t, {"F": force.reshape(-1, 1)}, commit=commit)
+
+
+def python_m(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "subsims.fmu", *args], capture_output=True, text=True,
+                          timeout=60, env=dict(os.environ))
+
+
+@pytest.mark.parametrize("version", [2, 3])
+def test_ports_and_metadata_come_from_the_model_description(fmus: dict[str, Path], version: int) -> None:
+    desc = Runtime(FmuSubsim(fmus[f"mass{version}"])).describe()  # before configure: the path was given
+    assert desc["inputs"] == {"F": {"size": 1, "unit": "N", "doc": "external force on the mass"}}
+    assert desc["outputs"] == {"u": {"size": 1, "unit": "m", "doc": "displacement"},
+                               "v": {"size": 1, "unit": "m/s", "doc": "velocity"}}
+    done = python_m(str(fmus[f"mass{version}"]), "--describe")
+    assert done.returncode == 0, done.stderr
+    meta = json.loads(done.stdout)
+    assert meta["fmi_version"] == f"{version}.0"
+    assert meta["interfaces"] == ["cs", "me"]
+    assert meta["can_save_state"] == {"cs": True, "me": True}
+    assert meta["parameters"] == {"m": "1", "k": "39.47841760435743", "u0": "0", "v0": "0"}
+    assert meta["inputs"] == {"F": "N"} and meta["outputs"] == {"u": "m", "v": "m/s"}
+
+
+@pytest.mark.parametrize(
+    ("params", "phrase"),
+    [
+        ({"mass": 1.0}, "unknown FMU variable(s) ['mass'] in mass2.fmu; settable: k, m, u0, v0"),
+        ({"u": 1.0}, "unknown FMU variable(s) ['u']"),  # an output with initial="calculated"
+        ({"F": 1.0}, "unknown FMU variable(s) ['F']"),  # a real input is a port, set by the coupling
+        ({"m": "heavy"}, "m is Real: needs a finite number, got 'heavy'"),
+        ({"m": True}, "m is Real: needs a finite number, got True"),
+        ({"interface": "scheduled"}, "interface 'scheduled' not available in mass2.fmu; it offers 'cs', 'me'"),
+        ({"substeps": 0}, "substeps must be a positive integer, got 0"),
+        ({"values": {"m": 2.0}}, "['m'] given both in params and in params.values"),
+        ({"k": -1.0}, "initialization failed: ExitInitializationMode: fmi2ExitInitializationMode failed with status "
+                      "3 (error): m and k must be positive"),
+    ],
+)
+def test_configure_refuses_bad_parameters_in_one_line(fmus: dict[str, Path], params: dict, phrase: str) -> None:
+    rt = Runtime(FmuSubsim)
+    with pytest.raises(CosimError) as err:
+        rt.configure({"fmu": str(fmus["mass2"]), "m": M, **params})
+    assert err.value.code == "bad_value"
+    assert phrase in err.value.message and "\n" not in err.value.message
+    assert rt.state is None  # nothing configured
+
+
+@pytest.mark.parametrize("version", [2, 3])
+def test_cosimulation_with_constant_force_is_exact(fmus: dict[str, Path], version: int) -> None:
+    """The FMU steps exactly for a force held over the step, so a constant force leaves no error at all:
+    this checks parameters, start values, stepping, outputs at the sample times and commit."""
+    rt = configured(fmus[f"mass{version}"], u0=0.3, v0=-1.0)
+    a, out = 7.0, []
+    for i in range(4):
+        t = np.linspace(0.1 * i, 0.1 * (i + 1), 6)
+        r = run(rt, t, np.full(6, a), commit=i > 0)
+        out.append((t, r["outputs"]["u"][:, 0]))
+    for t, u in out:
+        np.testing.assert_allclose(u, forced(t, 0.3, -1.0, a, 0.0), rtol=0, atol=1e-13)
+
+
+@pytest.mark.parametrize("version", [2, 3])
+def test_model_exchange_reads_inputs_between_samples(fmus: dict[str, Path], version: int) -> None:
+    """A ramp force is represented exactly by linear interpolation of its samples, so the ME subsim (scipy
+    DOP853 at rtol 1e-10) must match the closed form to solver accuracy. Holding each sample over the step,
+    as co-simulation does, is off by about b h / (2 k) = 5e-3 here."""
+    rt = configured(fmus[f"mass{version}"], interface="me", u0=0.5)
+    a, b = 1.0, 40.0
+    t = np.linspace(0.0, 0.5, 11)
+    u = run(rt, t, a + b * t)["outputs"]["u"][:, 0]
+    np.testing.assert_allclose(u, forced(t, 0.5, 0.0, a, b), rtol=0, atol=1e-8)
+
+
+def test_cosimulation_substeps_shrink_the_hold_error(fmus: dict[str, Path]) -> None:
+    """Holding the force over each communication step is first order in the step: eight communication
+    steps per sample interval (inputs from the interpolated segment) must cut the error about eightfold."""
+    t = np.linspace(0.0, 0.5, 11)
+    a, b = 0.0, 40.0
+    exact = forced(t, 0.0, 0.0, a, b)
+    errors = {}
+    for m in (1, 8):
+        u = run(configured(fmus["mass2"], substeps=m), t, a + b * t)["outputs"]["u"][:, 0]
+        errors[m] = np.abs(u - exact).max()
+    assert 6.0 < errors[1] / errors[8] < 10.0, errors
+
+
+@pytest.mark.parametrize("kind", ["cs", "me"])
+def test_advance_is_pure_so_rollback_and_reruns_repeat(fmus: dict[str, Path], kind: str) -> None:
+    rt = configured(fmus["mass3"], interface=kind, u0=1.0)
+    t = np.linspace(0.0, 0.2, 5)
+    first = run(rt, t, np.full(5, 2.0))["outputs"]
+    run(rt, t, np.full(5, -30.0))  # another trial from the same committed state
+    again = run(rt, t, np.full(5, 2.0))["outputs"]
+    for name in first:
+        assert np.array_equal(first[name], again[name])
+    rt.commit()
+    t2 = t + 0.2
+    after = run(rt, t2, np.full(5, 2.0))["outputs"]
+    rt.commit()
+    rt.rollback(0.2)
+    redo = run(rt, t2, np.full(5, 2.0))["outputs"]
+    assert np.array_equal(after["u"], redo["u"]) and np.array_equal(after["v"], redo["v"])
+
+
+def test_state_moves_to_a_fresh_runtime(fmus: dict[str, Path]) -> None:
+    """get_state / set_state carry the serialized FMU: a restarted subsim continues bit for bit."""
+    rt = configured(fmus["mass2"], u0=1.0)
+    t = np.linspace(0.0, 0.1, 5)
+    run(rt, t, np.full(5, 3.0))
+    rt.commit()
+    saved = rt.get_state()
+    fresh = configured(fmus["mass2"])  # other start values: the state must overwrite them
+    fresh.set_state(saved["time"], saved["state"])
+    t2 = t + 0.1
+    a = run(rt, t2, np.full(5, 3.0))["outputs"]["u"]
+    b = run(fresh, t2, np.full(5, 3.0))["outputs"]["u"]
+    assert np.array_equal(a, b)
+    np.testing.assert_allclose(a[:, 0], forced(t2, 1.0, 0.0, 3.0, 0.0), atol=1e-13)
+
+
+def test_a_state_vector_that_is_not_an_fmu_state_is_a_model_error(fmus: dict[str, Path]) -> None:
+    rt = configured(fmus["mass2"])
+    bad = rt.state.copy()
+    bad[0] += 1.0
+    rt.set_state(0.0, bad)
+    with pytest.raises(CosimError) as err:
+        run(rt, np.linspace(0, 0.1, 3), np.zeros(3))
+    assert err.value.code == "model_error" and "wrong marker" in err.value.message
+
+
+def test_state_encoding_round_trips_any_bytes_as_finite_floats() -> None:
+    rng = np.random.default_rng(7)
+    for data in (b"", b"\xff" * 13, bytes(rng.integers(0, 256, 1001, dtype=np.uint8)), b"\x00\x00\xf0\x7f" * 9):
+        vec = encode_state(data, 1200)
+        assert vec[0] == MAGIC and vec.size == 2 + 200 and np.isfinite(vec).all()
+        assert decode_state(vec) == data
+    with pytest.raises(ModelError, match="more than the 12 reserved"):
+        encode_state(b"x" * 13, 12)
+    vec = encode_state(b"abc", 12)
+    vec[3] = 0.5
+    with pytest.raises(ValueError, match="not the integers"):
+        decode_state(vec)
+    vec = encode_state(b"abc", 12)
+    vec[1] = 13.0
+    with pytest.raises(ValueError, match="does not fit"):
+        decode_state(vec)
+
+
+@pytest.mark.parametrize("version", [2, 3])
+def test_an_fmu_that_cannot_serialize_its_state_is_refused(fmus: dict[str, Path], version: int) -> None:
+    flag = "canSerializeFMUstate" if version == 2 else "canSerializeFMUState"
+    path = fmus[f"mass{version}_nostate"]
+    with pytest.raises(CosimError) as err:
+        Runtime(FmuSubsim).configure({"fmu": str(path)})
+    assert f"the FMU cannot serialize its state ({flag} is false for co-simulation)" in err.value.message
+    done = python_m(str(path), "--connect", "tcp/127.0.0.1:9", "--run", "r1")  # refused before connecting
+    assert done.returncode == 2
+    assert done.stderr.count("\n") == 1 and flag in done.stderr
+
+
+@pytest.mark.parametrize(
+    ("which", "phrase"),
+    [
+        ("not_zip", "not an FMU (not a zip archive)"),
+        ("no_description", "not an FMU (no modelDescription.xml in the archive)"),
+        ("bad_description", "invalid modelDescription.xml"),
+        ("no_binary", "the FMU has no binaries (binaries/"),
+        ("other_platform", "no binary for this platform (binaries/"),
+        ("missing", "no such FMU file"),
+    ],
+)
+def test_a_broken_fmu_is_one_clear_line(fmus: dict[str, Path], tmp_path: Path, which: str, phrase: str) -> None:
+    path = fmus.get(which, tmp_path / "missing.fmu")
+    with pytest.raises(FmuError) as err:
+        read_fmu(path)
+    assert phrase in str(err.value) and str(path) in str(err.value) and "\n" not in str(err.value)
+    if which == "other_platform":
+        assert "the FMU has binaries for win64" in str(err.value)
+    done = python_m(str(path), "--describe")
+    assert done.returncode == 2 and done.stdout == ""
+    assert done.stderr == f"subsims.fmu: {err.value}\n"
+    with pytest.raises(CosimError) as cerr:
+        Runtime(FmuSubsim).configure({"fmu": str(path)})
+    assert cerr.value.code == "bad_value" and phrase in cerr.value.message
+
+
+def test_bad_fmu_does_not_crash_a_served_subsim(fmus: dict[str, Path], cosim_bus) -> None:
+    """Over the bus: configure with a broken FMU is an error reply; the process keeps serving and then
+    configures a good one."""
+    handle = cosim_bus.spawn("", "fmu", model="subsims.fmu:FmuSubsim").handle
+    from cosim.contract import SubsimError
+
+    with pytest.raises(SubsimError) as err:
+        handle.configure({"fmu": str(fmus["other_platform"])})
+    assert "no binary for this platform" in err.value.message
+    desc = handle.configure({"fmu": str(fmus["mass2"]), "u0": 1.0})
+    assert list(desc.outputs) == ["u", "v"]
+
+
+def test_python_m_subsims_fmu_serves_the_fmu_given_on_the_command_line(fmus: dict[str, Path], cosim_bus) -> None:
+    """``python -m subsims.fmu mass3.fmu --connect EP --run RUN --name m1``: the ports are known before
+    configure, and configure needs no ``fmu`` parameter."""
+    cmd = [sys.executable, "-m", "subsims.fmu", str(fmus["mass3"]), "--connect", cosim_bus.endpoint,
+           "--run", cosim_bus.run, "--name", "m1"]
+    proc = subprocess.Popen(cmd, env=dict(os.environ))
+    handle = None
+    try:
+        handle = cosim_bus.attach("m1", timeout=30.0, wait=30.0)
+        desc = handle.describe()
+        assert list(desc.inputs) == ["F"] and desc.outputs["u"].unit == "m"
+        handle.configure({"m": M, "k": KS, "u0": 0.25})
+        t = np.linspace(0.0, 0.1, 5)
+        out = handle.run_interval(t, {"F": np.full((5, 1), 4.0)}).outputs["u"][:, 0]
+        np.testing.assert_allclose(out, forced(t, 0.25, 0.0, 4.0, 0.0), atol=1e-13)
+        handle.shutdown()
+        assert proc.wait(20) == 0
+    finally:
+        if handle is not None:
+            handle.close()
+        if proc.poll() is None:
+            proc.terminate()
+            try:
+                proc.wait(5)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+
+
+def test_a_subsim_started_with_its_fmu_serves_that_file(fmus: dict[str, Path]) -> None:
+    """An external subsim started as ``python -m subsims.fmu /here/mass2.fmu`` is configured with the
+    coordinator's path of the same file: the name must match, the directory is the subsim's own."""
+    rt = Runtime(FmuSubsim(fmus["mass2"]))
+    rt.configure({"fmu": "/on/the/coordinator/mass2.fmu", "u0": 1.0})
+    assert rt.model.info.path == fmus["mass2"].resolve()
+    with pytest.raises(CosimError) as err:
+        rt.configure({"fmu": str(fmus["mass3"])})
+    assert "this subsim serves mass2.fmu (given when it started); params.fmu names mass3.fmu" in err.value.message

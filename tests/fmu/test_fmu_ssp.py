@@ -1,0 +1,165 @@
+"""SSP import (``cosim run system.ssp``) and the ``fmu = "path.fmu"`` scenario shorthand."""
+
+from __future__ import annotations
+
+import shutil
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cosim.cli import main as cosim_main
+from cosim.results import read_results
+from cosim.runner import run_scenario
+from cosim.scenario import ScenarioError, load
+from subsims.fmu.ssp import read_ssp
+
+SCENARIOS = Path(__file__).resolve().parents[2] / "scenarios" / "fmu"
+K12 = 16 * np.pi**2
+K = 20 * np.pi**2
+SSD = "http://ssp-standard.org/SSP1/SystemStructureDescription"
+SSC = "http://ssp-standard.org/SSP1/SystemStructureCommon"
+SSV = "http://ssp-standard.org/SSP1/SystemStructureParameterValues"
+
+
+def parameter_set(values: dict[str, float]) -> str:
+    rows = "".join(f'<ssv:Parameter name="{n}"><ssv:Real value="{v!r}"/></ssv:Parameter>' for n, v in values.items())
+    return f'<ssv:ParameterSet xmlns:ssv="{SSV}" version="1.0" name="p"><ssv:Parameters>{rows}</ssv:Parameters>' \
+           "</ssv:ParameterSet>"
+
+
+def ssd(components: str, connections: str, experiment: str = '<ssd:DefaultExperiment startTime="0" stopTime="0.5"/>'
+        ) -> str:
+    return (f'<?xml version="1.0" encoding="UTF-8"?>\n<ssd:SystemStructureDescription xmlns:ssd="{SSD}" '
+            f'xmlns:ssc="{SSC}" xmlns:ssv="{SSV}" version="1.0" name="oscillator-ssp"><ssd:System name="top">'
+            f"<ssd:Elements>{components}</ssd:Elements><ssd:Connections>{connections}</ssd:Connections>"
+            f"</ssd:System>{experiment}</ssd:SystemStructureDescription>")
+
+
+def component(name: str, bindings: str, source: str = "resources/mass.fmu",
+              kind: str = "application/x-fmu-sharedlibrary") -> str:
+    return (f'<ssd:Component name="{name}" type="{kind}" source="{source}"><ssd:Connectors>'
+            '<ssd:Connector name="F" kind="input"><ssc:Real/></ssd:Connector>'
+            '<ssd:Connector name="u" kind="output"><ssc:Real/></ssd:Connector>'
+            f"</ssd:Connectors><ssd:ParameterBindings>{bindings}</ssd:ParameterBindings></ssd:Component>")
+
+
+def connection(start: str, end: str, factor: float | None = K12) -> str:
+    (se, sc), (ee, ec) = start.split("."), end.split(".")
+    inner = "" if factor is None else f'<ssc:LinearTransformation factor="{factor!r}" offset="0"/>'
+    return (f'<ssd:Connection startElement="{se}" startConnector="{sc}" endElement="{ee}" endConnector="{ec}">'
+            f"{inner}</ssd:Connection>")
+
+
+def oscillator_ssd() -> str:
+    inline = (f"<ssd:ParameterBinding><ssd:ParameterValues>{parameter_set({'m': 1.0, 'k': K, 'u0': 1.0})}"
+              "</ssd:ParameterValues></ssd:ParameterBinding>")
+    from_file = '<ssd:ParameterBinding source="resources/mass2.ssv" prefix="mass2."/>'
+    return ssd(component("mass1", inline) + component("mass2", from_file),
+               connection("mass2.u", "mass1.F") + connection("mass1.u", "mass2.F"))
+
+
+def write_ssp(path: Path, ssd_text: str | None, fmu: Path | None, extra: dict[str, str] | None = None) -> Path:
+    with zipfile.ZipFile(path, "w") as zf:
+        if ssd_text is not None:
+            zf.writestr("SystemStructure.ssd", ssd_text)
+        if fmu is not None:
+            zf.write(fmu, "resources/mass.fmu")
+        for name, text in (extra or {}).items():
+            zf.writestr(name, text)
+    return path
+
+
+COMPANION = """\
+[coupling]
+method = "centralized"
+interval = 0.02
+samples = 21
+first_guess = "extrapolate"
+interp = "linear"
+tol = 1e-12
+res = 1e-13
+max_stages = 60
+"""
+
+
+def test_cosim_run_ssp_gives_the_same_run_as_the_toml_scenario(
+    tmp_path: Path, fmus: dict[str, Path], capsys: pytest.CaptureFixture
+) -> None:
+    """The SSP (inline and .ssv parameters with a prefix, linear transformations, DefaultExperiment) plus a
+    companion TOML with the coupling settings is the scenario scenarios/fmu/oscillator_fmu.toml with
+    method centralized: the run over Zenoh must be bit for bit the same."""
+    ssv = parameter_set({"mass2.m": 1.0, "mass2.k": K})
+    ssp = write_ssp(tmp_path / "system.ssp", oscillator_ssd(), fmus["mass2"], {"resources/mass2.ssv": ssv})
+    (tmp_path / "system.toml").write_text(COMPANION)
+
+    raw = read_ssp(ssp)
+    assert raw["stop"] == 0.5 and raw["coupling"]["method"] == "centralized"
+    assert {n: {k: v for k, v in s["params"].items() if k != "fmu"} for n, s in raw["subsims"].items()} == {
+        "mass1": {"m": 1.0, "k": K, "u0": 1.0}, "mass2": {"m": 1.0, "k": K}}
+    assert raw["couplings"][0] == {"to": "mass1.F", "from": "mass2.u", "transform": "linear",
+                                   "params": {"gains": [K12], "offset": 0.0}}
+
+    out = tmp_path / "ssp.csv"
+    code = cosim_main(["run", str(ssp), "--output", str(out), "--quiet"])
+    printed = capsys.readouterr()
+    assert code == 0, printed.err
+    assert printed.out.startswith("oscillator-ssp (centralized): 25 intervals to t = 0.5")
+
+    shutil.copy(fmus["mass2"], tmp_path / "mass2.fmu")
+    shutil.copy(SCENARIOS / "oscillator_fmu.toml", tmp_path / "scenario.toml")
+    ref = tmp_path / "toml.csv"
+    run_scenario(load(tmp_path / "scenario.toml"), method="centralized", stop=0.5, output=ref, inprocess=True,
+                 progress=False)
+    cols, data = read_results(out)
+    cols_ref, data_ref = read_results(ref)
+    assert cols == cols_ref and data.shape == data_ref.shape == (501, 5)
+    assert np.array_equal(data, data_ref)
+
+
+@pytest.mark.parametrize(
+    ("case", "phrase"),
+    [
+        ("no_ssd", "not an SSP file (no SystemStructure.ssd in the archive)"),
+        ("not_fmu", "component 'mass1': only FMU components are supported"),
+        ("missing_fmu", "component 'mass1': its FMU 'resources/other.fmu' is not in the archive"),
+        ("system_connector", "connection None.u -> mass1.F: system-level connectors are not supported"),
+        ("no_stop", "no stop time: give DefaultExperiment stopTime in the SSD or stop = ... in system.toml"),
+        ("bad_companion", "system.toml: [subsims.mass9] is not a component of system.ssp"),
+        ("missing_ssv", "parameter file 'resources/nope.ssv' is not in the archive"),
+    ],
+)
+def test_a_bad_ssp_is_one_clear_line(
+    tmp_path: Path, fmus: dict[str, Path], capsys: pytest.CaptureFixture, case: str, phrase: str
+) -> None:
+    plain = component("mass1", "")
+    text = {
+        "no_ssd": None,
+        "not_fmu": ssd(component("mass1", "", kind="application/x-ssp-package", source="resources/x.ssp"), ""),
+        "missing_fmu": ssd(component("mass1", "", source="resources/other.fmu"), ""),
+        "system_connector": ssd(plain, '<ssd:Connection startConnector="u" endElement="mass1" endConnector="F"/>'),
+        "no_stop": ssd(plain, "", experiment=""),
+        "bad_companion": ssd(plain, ""),
+        "missing_ssv": ssd(component("mass1", '<ssd:ParameterBinding source="resources/nope.ssv"/>'), ""),
+    }[case]
+    ssp = write_ssp(tmp_path / "system.ssp", text, fmus["mass2"])
+    if case == "bad_companion":
+        (tmp_path / "system.toml").write_text("[subsims.mass9.params]\nm = 2.0\n")
+    with pytest.raises(ScenarioError) as err:
+        load(ssp)
+    assert phrase in str(err.value) and "\n" not in str(err.value)
+    assert cosim_main(["run", str(ssp), "--quiet"]) == 2
+    assert capsys.readouterr().err == f"cosim: {err.value}\n"
+
+
+def test_fmu_shorthand_resolves_against_the_scenario_and_refuses_model_too(tmp_path: Path) -> None:
+    (tmp_path / "sub").mkdir()
+    path = tmp_path / "sub" / "s.toml"
+    path.write_text('start = 2.0\nstop = 3.0\n[subsims.a]\nfmu = "../m.fmu"\nparams = { k = 1.0 }\n')
+    spec = load(path).subsims["a"]
+    assert spec.model == "subsims.fmu:FmuSubsim"
+    assert spec.params == {"k": 1.0, "fmu": str(tmp_path / "m.fmu"), "start_time": 2.0}
+    path.write_text('stop = 1.0\n[subsims.a]\nfmu = "m.fmu"\nmodel = "subsims.fmu:FmuSubsim"\n')
+    with pytest.raises(ScenarioError, match=r"\[subsims.a\] give fmu or model, not both"):
+        load(path)
