@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cosim.contract import SubsimDied
+from cosim.contract import SubsimDied, SubsimError, SubsimHung
 from cosim.coupler.convergence import Tolerance
 from cosim.coupler.couplings import Coupling
 from cosim.coupler.relaxation import Interval, Settings
@@ -41,8 +41,10 @@ def settings(method: str) -> Settings:
 class Ring:
     """The three processes on one bus, and a coordinator that can replace them."""
 
-    def __init__(self, bus: Bus, method: str, delay: float = 0.0, restarts: int = 2) -> None:
-        self.bus, self.delay = bus, delay
+    def __init__(
+        self, bus: Bus, method: str, delay: float = 0.0, restarts: int = 2, params: dict | None = None
+    ) -> None:
+        self.bus, self.delay, self.params = bus, delay, {**PARAMS, **(params or {})}
         self.handles = {name: self.start(name) for name in PARAMS}
         self.log: list[str] = []
         recovery = Recovery(self.revive, restarts=restarts, checkpoint_every=3, log=self.log.append)
@@ -51,7 +53,7 @@ class Ring:
         self.intervals: list[Interval] = []
 
     def configure(self, handle, name: str):
-        handle.configure({**PARAMS[name], "compute_delay": self.delay})
+        handle.configure({"compute_delay": self.delay, **self.params[name]})
         return handle
 
     def start(self, name: str):
@@ -201,3 +203,57 @@ def test_cosim_run_replaces_a_killed_subsim_and_writes_the_same_csv(tmp_path: Pa
     assert "replaced (1 of 2)" in err
     assert (tmp_path / "hurt.csv").read_bytes() == (tmp_path / "clean.csv").read_bytes()
     assert read_results(tmp_path / "hurt.csv")[1].shape[0] > 100
+
+
+def test_a_model_stuck_in_advance_is_found_and_the_run_fails_when_every_replacement_sticks_too() -> None:
+    """The replacement is configured the same way, so it hangs again: after the restarts the run stops with
+    the hang named (it does not wait for zenoh's 60 s query timeout)."""
+    with Bus.open() as bus:
+        ring = Ring(bus, "centralized", restarts=1, params={"b": {**PARAMS["b"], "compute_delay": 30.0}})
+        ring.coordinator.deadline = Deadline(fixed=1.0)
+        started = time.monotonic()
+        with pytest.raises(SubsimError) as err:
+            ring.run()
+        assert isinstance(err.value, SubsimHung) and err.value.subsim == "b"
+        assert [r.subsim for r in ring.coordinator.restarts] == ["b"]
+        assert time.monotonic() - started < 20  # two 1 s deadlines and a restart, not a 30 s model
+
+
+def test_an_external_subsim_that_disappears_is_waited_for_and_restored(tmp_path: Path) -> None:
+    """`cosim run` with mass2 external: the 'user' starts it, it is killed mid-run, the user starts it again with
+    the same command; the run goes on and the CSV equals an undisturbed run's."""
+    scenario = Path(__file__).resolve().parents[1] / "scenarios" / "oscillator.toml"
+    text = scenario.read_text()
+    external = tmp_path / "ext.toml"
+    external.write_text(text.replace('[subsims.mass2]\nmodel = "subsims.oscillator.subsim:Mass"',
+                                     '[subsims.mass2]\nexternal = true\nmodel = "subsims.oscillator.subsim:Mass"'))
+    cmd = [sys.executable, "-m", "cosim.cli", "run", "--stop", "30", "--quiet"]
+    clean = subprocess.run([*cmd, str(scenario), "--output", str(tmp_path / "clean.csv")], capture_output=True,
+                           text=True, timeout=300)
+    assert clean.returncode == 0, clean.stderr
+    coord = subprocess.Popen([*cmd, str(external), "--output", str(tmp_path / "ext.csv")],
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    users: list[subprocess.Popen] = []
+    try:
+        command = None
+        assert coord.stderr is not None
+        for line in coord.stderr:
+            if line.strip().startswith("python -m cosim.serve"):
+                command = [sys.executable, *line.split()[1:]]
+                break
+        assert command is not None
+        users.append(subprocess.Popen(command, stderr=subprocess.DEVNULL))
+        time.sleep(2.0)  # mid-run
+        users[0].kill()
+        users[0].wait()
+        time.sleep(0.5)
+        users.append(subprocess.Popen(command, stderr=subprocess.DEVNULL))
+        _, err = coord.communicate(timeout=300)
+        assert coord.returncode == 0, err
+        assert "mass2 died" in err
+        assert (tmp_path / "ext.csv").read_bytes() == (tmp_path / "clean.csv").read_bytes()
+    finally:
+        for p in [coord, *users]:
+            if p.poll() is None:
+                p.kill()
+            p.wait()
