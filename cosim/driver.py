@@ -46,27 +46,41 @@ Revive = Callable[[str], SubsimHandle]  # a new process for the named subsim, co
 class Deadline:
     """How long to wait for a reply before calling a subsim hung.
 
-    ``fixed`` seconds if given; otherwise ``factor`` times the slowest of the last ``window`` runs, at least
-    ``floor``; ``initial`` until ``warmup`` runs have been timed (the first requests pay imports and caches).
+    ``fixed`` seconds if given; otherwise the largest of ``floor``, ``typical`` times the median and
+    ``spike`` times the slowest of the last ``window`` runs; ``initial`` until ``warmup`` runs have been
+    timed (the first requests pay imports and caches). A median-based deadline follows the model's real
+    cost; the spike term keeps a loaded machine's occasional slow request from being called a hang.
     """
 
     fixed: float | None = None
     floor: float = 1.5
-    factor: float = 100.0
+    typical: float = 50.0
+    spike: float = 3.0
     initial: float = 30.0
     warmup: int = 5
     window: int = 200
-    _recent: deque = field(default_factory=lambda: deque(maxlen=200), repr=False)
+    _recent: deque = field(default_factory=deque, repr=False)
+    _current: float | None = field(default=None, repr=False)
+    _seen: int = field(default=0, repr=False)
 
     def seconds(self) -> float:
         if self.fixed is not None:
             return self.fixed
-        if len(self._recent) < self.warmup:
+        if self._current is None:
             return self.initial
-        return max(self.floor, self.factor * max(self._recent))
+        return self._current
 
     def observe(self, seconds: float) -> None:
         self._recent.append(seconds)
+        if len(self._recent) > self.window:
+            self._recent.popleft()
+        self._seen += 1
+        # re-derived at the end of the warm-up, then every 20 runs (not per request: the hot path stays cheap),
+        # and at once when a run is slower than the spike allowance of the current deadline
+        if self._seen == self.warmup or (self._seen > self.warmup and (
+                self._seen % 20 == 0 or (self._current is not None and self.spike * seconds > self._current))):
+            ordered = sorted(self._recent)
+            self._current = max(self.floor, self.typical * ordered[len(ordered) // 2], self.spike * ordered[-1])
 
 
 @dataclass

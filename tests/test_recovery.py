@@ -257,3 +257,17 @@ def test_an_external_subsim_that_disappears_is_waited_for_and_restored(tmp_path:
             if p.poll() is None:
                 p.kill()
             p.wait()
+
+
+def test_the_deadline_follows_measured_request_times() -> None:
+    d = Deadline(floor=1.5, typical=50.0, spike=3.0, initial=30.0, warmup=5)
+    assert d.seconds() == 30.0  # nothing measured yet
+    for _ in range(5):
+        d.observe(0.001)
+    assert d.seconds() == 1.5  # 50 x 1 ms is below the floor
+    for _ in range(40):
+        d.observe(0.1)  # a slower model: 50 x the median
+    assert d.seconds() == pytest.approx(5.0)
+    d.observe(3.0)  # one slow request: at once three times it
+    assert d.seconds() == pytest.approx(9.0)
+    assert Deadline(fixed=0.7).seconds() == 0.7
