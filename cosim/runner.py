@@ -15,8 +15,9 @@ from cosim.coupler.couplings import SignalRef, check_couplings
 from cosim.coupler.relaxation import Coordinator, Interval, RunSummary
 from cosim.handles import Description, InProcessHandle, SubsimHandle
 from cosim.launch import Bus, subsim_command
+from cosim.outputs import reserve_output
 from cosim.progress import Progress
-from cosim.results import ResultWriter, diag_path
+from cosim.results import ResultWriter, diag_path, output_units
 from cosim.scenario import Scenario, ScenarioError
 
 Log = Callable[[str], None]
@@ -136,15 +137,23 @@ def run_scenario(
     progress: bool = True,
     log: Log = _stderr,
     on_interval: Callable[[Interval], None] | None = None,
+    overwrite: bool = True,
 ) -> RunReport:
+    """``overwrite=False`` refuses an existing result (OutputError) before anything is launched."""
     method = method or scenario.default_method
     settings = scenario.settings_for(method)
     stop = scenario.stop if stop is None else stop
     output = output or default_output(scenario, method)
-    session = open_session(scenario, inprocess=inprocess, listen=listen, log=log)
+    lock = reserve_output(output, overwrite)  # locked and checked before anything is launched
+    try:
+        session = open_session(scenario, inprocess=inprocess, listen=listen, log=log)
+    except BaseException:
+        lock.release()
+        raise
     try:
         coordinator = Coordinator(session.handles, scenario.couplings, settings, session.descriptions)
-        writer = ResultWriter(output, output_signals(scenario, session.descriptions))
+        writer = ResultWriter(output, output_signals(scenario, session.descriptions),
+                              output_units(session.descriptions), lock=lock)
         bar = Progress(scenario.start, stop, enabled=progress)
 
         def each(interval: Interval) -> None:
@@ -162,3 +171,4 @@ def run_scenario(
                          [str(c) for c in coordinator.feedback])
     finally:
         session.close()
+        lock.release()  # if the writer never took it
