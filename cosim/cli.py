@@ -13,7 +13,7 @@ import zenoh
 from cosim import __version__, interrupt
 from cosim.contract import SubsimError
 from cosim.coupler.relaxation import METHODS, Coordinator, Interval, NotConverged
-from cosim.outputs import OutputError
+from cosim.outputs import OutputError, OutputWriteError
 from cosim.preflight import UsageError, check_listen, check_stop, zenoh_error_line
 from cosim.runner import default_output, open_session, run_scenario
 from cosim.scenario import ScenarioError, load
@@ -31,9 +31,11 @@ def _run(args: argparse.Namespace) -> int:
         with interrupt.handling():
             return _run_until_done(args, state)
     except interrupt.Interrupted as exc:
-        where = "before any interval was committed" if state["t"] is None else f"at t = {state['t']:.6g} s"
-        target = f"; every committed interval is in {state['output']}" if state["output"] is not None else ""
-        print(f"cosim: stopped by {exc.name} {where}{target}", file=sys.stderr, flush=True)
+        if state["t"] is None:
+            where = "before any interval was committed"
+        else:
+            where = f"at t = {state['t']:.6g} s; every committed interval is in {state['output']}"
+        print(f"cosim: stopped by {exc.name} {where}", file=sys.stderr, flush=True)
         return exc.exit_status
 
 
@@ -192,6 +194,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except BrokenPipeError:  # `cosim describe X | head -1`: the reader has what it wanted
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit
         return 141  # 128 + SIGPIPE, as a program killed by the signal
+    except OutputWriteError as exc:  # the run stopped; its files end at the last whole interval
+        print(f"cosim: run stopped: {exc}", file=sys.stderr)
+        return 1
     except (ScenarioError, OutputError, UsageError) as exc:
         print(f"cosim: {exc}", file=sys.stderr)
         return 2

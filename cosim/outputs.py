@@ -33,6 +33,10 @@ class OutputError(RuntimeError):
     """An output file cannot be used or written; the message is one actionable line."""
 
 
+class OutputWriteError(OutputError):
+    """Writing failed during the run (disk full, I/O error); the files end at their last whole interval."""
+
+
 def diag_path(path: Path) -> Path:
     return path.with_name(path.name + ".diag.csv")
 
@@ -202,7 +206,7 @@ class AppendFile:
                 pass
             where = ends_at()
             reason = "disk full" if exc.errno in (errno.ENOSPC, errno.EDQUOT) else describe_oserror(exc)
-            raise OutputError(f"{reason} writing {self.path} ({self.what}){': ' + where if where else ''}; "
+            raise OutputWriteError(f"{reason} writing {self.path} ({self.what}){': ' + where if where else ''}; "
                               "free space or choose another --output, then run again") from None
 
     def close(self, sync: bool = True) -> None:
@@ -231,7 +235,8 @@ def atomic_write(path: Path, write: Callable[[BinaryIO], None]) -> None:
     except OSError as exc:
         tmp.unlink(missing_ok=True)
         reason = "disk full" if exc.errno in (errno.ENOSPC, errno.EDQUOT) else describe_oserror(exc)
-        raise OutputError(f"{reason} writing {path}; free space or choose another place, then run again") from None
+        raise OutputWriteError(f"{reason} writing {path}; free space or choose another place, then run again") \
+            from None
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import csv
 import json
+import warnings
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -31,6 +32,7 @@ from cosim.outputs import (
     AppendFile,
     OutputError,
     OutputLock,
+    OutputWriteError,
     atomic_write,
     diag_path,
     is_npz,
@@ -98,9 +100,14 @@ class ResultWriter:
                 self._data.append((",".join(self.columns) + "\n").encode())
             self._diag = AppendFile(diag_path(self.path), "diagnostics")
             self._diag.append((",".join(DIAG_COLUMNS) + "\n").encode())
-        except BaseException:
+        except BaseException:  # nothing of this run is in the files yet: leave none behind
             self.failed = True
             self._close_files()
+            for f in (self._data, self._diag):
+                if f is not None:
+                    f.path.unlink(missing_ok=True)
+            if not self._npz:
+                meta_path(self.path).unlink(missing_ok=True)
             self._lock.release()
             raise
 
@@ -128,7 +135,7 @@ class ResultWriter:
                 line = [self._count, repr(float(t[0])), repr(float(t[-1])), interval.stages,
                         f"{interval.largest_residual:.6e}", f"{interval.wall_time:.6f}", interval.halvings]
                 self._diag.append((",".join(map(str, line)) + "\n").encode())
-            except OutputError:
+            except OutputWriteError:
                 self.failed = True
                 raise
 
@@ -174,7 +181,9 @@ def read_results(path: str | Path) -> tuple[list[str], np.ndarray]:
         if f.tell() and (f.seek(-1, 2), f.read(1))[1] != b"\n":
             raise ValueError(f"{path} ends in a partial row (an interrupted write): `cosim recover {path}` "
                              "cuts it off")
-    data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", "loadtxt: input contained no data")
+        data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
     if data.size == 0:
         data = np.empty((0, len(columns)))
     return columns, data

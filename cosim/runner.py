@@ -10,6 +10,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from cosim import interrupt
 from cosim.contract import SubsimError
 from cosim.coupler.couplings import SignalRef, check_couplings
 from cosim.coupler.relaxation import Coordinator, Interval, RunSummary
@@ -170,5 +171,6 @@ def run_scenario(
         return RunReport(method, summary, output, diag_path(output), coordinator.order,
                          [str(c) for c in coordinator.feedback])
     finally:
-        session.close()
+        with interrupt.deferred():  # a signal arriving now must not cut the subsims' stop short
+            session.close()
         lock.release()  # if the writer never took it
