@@ -250,16 +250,14 @@ def stream_header(columns: list[str], units: list[str]) -> bytes:
 
 def read_stream(path: Path) -> tuple[list[str], list[str], np.ndarray]:
     """Columns, units and the whole rows of a ``.partial`` stream (a torn last row is left out)."""
-    raw = path.read_bytes()
-    if not raw.startswith(STREAM_MAGIC):
-        raise ValueError(f"{path} is not a cosim sample stream")
-    end = raw.index(b"\n", len(STREAM_MAGIC))
-    head = json.loads(raw[len(STREAM_MAGIC):end])
+    with path.open("rb") as f:
+        if f.read(len(STREAM_MAGIC)) != STREAM_MAGIC:
+            raise ValueError(f"{path} is not a cosim sample stream")
+        head = json.loads(f.readline())
+        offset = f.tell()
     columns, units = list(head["columns"]), list(head["units"])
-    body = raw[end + 1:]
-    width = 8 * len(columns)
-    n = len(body) // width
-    data = np.frombuffer(body[: n * width], dtype="<f8").reshape(n, len(columns)).copy()
+    n = (path.stat().st_size - offset) // (8 * len(columns))
+    data = np.fromfile(path, dtype="<f8", count=n * len(columns), offset=offset).reshape(n, len(columns))
     return columns, units, data
 
 

@@ -132,9 +132,11 @@ def assert_whole_intervals(path: Path) -> np.ndarray:
 
 # --- A. interrupted coordinator --------------------------------------------------------------------
 
-@pytest.mark.parametrize(("sig", "suffix"), [(signal.SIGINT, ".npz"), (signal.SIGTERM, ".csv"),
-                                             (signal.SIGTERM, ".npz"), (signal.SIGHUP, ".csv"),
-                                             (signal.SIGHUP, ".npz")])
+@pytest.mark.parametrize(("sig", "suffix"), [
+    pytest.param(sig, suffix, id=f"{sig.name}-{suffix[1:]}")
+    for sig, suffix in [(signal.SIGINT, ".npz"), (signal.SIGTERM, ".csv"), (signal.SIGTERM, ".npz"),
+                        (signal.SIGHUP, ".csv"), (signal.SIGHUP, ".npz")]  # SIGINT-csv: test_cli.py
+])
 def test_signal_stops_subsims_keeps_every_committed_interval_and_says_where(
     tmp_path: Path, runs: list[Run], sig: int, suffix: str
 ) -> None:
@@ -452,3 +454,30 @@ def test_plot_of_an_empty_or_one_row_result_is_a_clear_error(tmp_path: Path, row
     expected = "no samples" if rows == 0 else "only one sample (t = 0): nothing to plot against time"
     assert done.stderr.splitlines() == [f"cosim plot: {path}: {expected}" + (
         " (the run stopped before its first interval was committed)" if rows == 0 else "")]
+
+
+def test_a_signal_during_an_interval_write_waits_for_the_whole_interval(tmp_path: Path,
+                                                                        monkeypatch: pytest.MonkeyPatch) -> None:
+    from cosim import interrupt
+    from cosim.coupler.couplings import SignalRef
+    from cosim.coupler.relaxation import Interval
+    from cosim.results import ResultWriter
+
+    out = tmp_path / "w.csv"
+    writer = ResultWriter(out, [(SignalRef("m", "x"), 1)], {"m.x": "m"})
+    real_append = AppendFile.append
+
+    def signalled_append(self, data, *args) -> None:  # SIGTERM arrives between the rows and the diagnostics
+        real_append(self, data, *args)
+        if self.what == "results":
+            os.kill(os.getpid(), signal.SIGTERM)
+
+    monkeypatch.setattr(AppendFile, "append", signalled_append)
+    t = np.linspace(0.0, 1.0, 5)
+    with interrupt.handling():
+        with pytest.raises(interrupt.Interrupted) as caught:
+            writer.write(Interval(t, {"m": {"x": t[:, None] ** 2}}, {}, 2, {}))
+        os.kill(os.getpid(), signal.SIGHUP)  # while stopping, a second signal changes nothing
+        writer.close()
+    assert caught.value.exit_status == 143
+    assert read_results(out)[1].shape == (5, 2) and len(diag_rows(out.with_name("w.csv.diag.csv"))) == 1
