@@ -11,6 +11,7 @@ Ctrl-C must not cut the cleanup short. The exit status is 128 + the signal numbe
 from __future__ import annotations
 
 import signal
+import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from types import FrameType
@@ -50,7 +51,11 @@ def _handler(signum: int, frame: FrameType | None) -> None:
 
 @contextmanager
 def handling(signals: tuple[int, ...] = SIGNALS) -> Iterator[None]:
-    """Install the handlers (main thread only) for the duration of the block; restore the old ones."""
+    """Install the handlers for the duration of the block and restore the old ones. Outside the main
+    thread (where Python runs signal handlers) it does nothing."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
     old = {s: signal.getsignal(s) for s in signals}
     _State.active, _State.depth, _State.pending, _State.raised = True, 0, None, False
     for s in signals:
