@@ -74,12 +74,13 @@ class OutputLock:
     or by the death of the process."""
 
     def __init__(self, path: Path, fd: int) -> None:
-        self.path, self.file, self._fd = path, lock_path(path), fd
+        self.path, self.file, self._fd = path, lock_path(path.resolve()), fd
 
     @classmethod
     def acquire(cls, path: Path) -> OutputLock:
-        """Lock ``path`` for this process; OutputError naming the holder if another live run has it."""
-        lock = lock_path(path)
+        """Lock ``path`` for this process; OutputError naming the holder if another live run has it.
+        The lock sits beside the file a symlink points to, so two names of one file share it."""
+        lock = lock_path(path.resolve())
         for _ in range(20):  # the holder may remove the file between our open and our flock: then again
             try:
                 fd = os.open(lock, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)

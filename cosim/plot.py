@@ -30,6 +30,7 @@ from cosim.outputs import OutputError, atomic_write
 from cosim.results import read_results, read_units
 
 FIGURES_GROUP = "cosim.figures"
+SIDECARS = (".diag.csv", ".meta.json", ".lock", ".partial")  # files a run writes beside its results
 MAX_POINTS = 4000  # envelope buckets per line
 _COLUMN = re.compile(r"^(?P<signal>[^\[]+)\[(?P<index>\d+)\]$")
 
@@ -222,13 +223,13 @@ def plot_files(paths: Sequence[Path], out: Path, signals: Sequence[str] | None =
 
 def plot_command(args: argparse.Namespace) -> int:
     """``cosim plot RESULTS... [--out DIR] [--signals ...]`` (and ``args.window`` = (t0, t1) if present)."""
-    paths = [p for p in args.results if not p.name.endswith(".diag.csv")]
+    paths = [p for p in args.results if not p.name.endswith(SIDECARS)]  # `cosim plot results/*` works
     for p in args.results:
         if p not in paths:
-            print(f"cosim plot: skipping diagnostics file {p}", file=sys.stderr)
+            print(f"cosim plot: skipping {p}, which belongs to a result file", file=sys.stderr)
     try:
         if not paths:
-            raise PlotError("no result files given (only diagnostics files)")
+            raise PlotError("no result files given (only the diagnostics, units, locks or streams beside them)")
         written = plot_files(paths, args.out, args.signals, getattr(args, "window", None))
     except (PlotError, OutputError) as exc:
         print(f"cosim plot: {exc}", file=sys.stderr)

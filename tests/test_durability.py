@@ -237,6 +237,10 @@ def test_a_second_run_on_the_same_file_is_refused_naming_the_first(tmp_path: Pat
     assert second.returncode == 2
     assert second.stderr.splitlines() == [f"cosim: {out} is being written by another cosim run (pid {first.proc.pid}, "
                                           f"lock {out}.lock): wait for it to finish or choose another --output"]
+    alias = tmp_path / "alias.csv"
+    alias.symlink_to(out)  # another name of the same file
+    third = cosim("run", str(OSCILLATOR), "--stop", "1", "--output", str(alias), "--overwrite", "--inprocess")
+    assert third.returncode == 2 and f"pid {first.proc.pid}" in third.stderr
     first.proc.send_signal(signal.SIGINT)
     assert first.wait() == 130
     assert_whole_intervals(out)  # the first run's file is intact

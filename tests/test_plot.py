@@ -52,8 +52,10 @@ def generic_result(path: Path, shift: float = 0.0) -> Path:
 
 
 def test_satellite_figures(satellite_results: list[Path], tmp_path: Path) -> None:
-    diag = [p.with_name(p.name + ".diag.csv") for p in satellite_results]  # as a shell glob would add them
-    args = argparse.Namespace(results=[*satellite_results, *diag], out=tmp_path / "png", signals=None)
+    # what `cosim plot results/*` passes: the diagnostics and units files beside the results (skipped)
+    beside = [p.with_name(p.name + s) for p in satellite_results for s in (".diag.csv", ".meta.json")]
+    assert all(p.exists() for p in beside)
+    args = argparse.Namespace(results=[*satellite_results, *beside], out=tmp_path / "png", signals=None)
     assert plot_command(args) == 0
     for name in ("satellite-euler", "satellite-rates", "satellite-altitude", "orbit.R", "orbit.V",
                  "attitude.phi", "attitude.omega", "aero.force", "aero.torque"):
