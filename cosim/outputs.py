@@ -95,7 +95,7 @@ class OutputLock:
                 raise OutputError(f"{path} is being written by another cosim run (pid {holder or 'unknown'}, "
                                   f"lock {lock}): wait for it to finish or choose another --output") from None
             try:
-                same = os.fstat(fd).st_ino == os.stat(lock).st_ino
+                same = _same_file(os.fstat(fd), os.stat(lock))
             except FileNotFoundError:
                 same = False
             if same:
@@ -110,7 +110,7 @@ class OutputLock:
         if self._fd is None:
             return
         try:
-            if os.fstat(self._fd).st_ino == os.stat(self.file).st_ino:
+            if _same_file(os.fstat(self._fd), os.stat(self.file)):
                 os.unlink(self.file)
         except OSError:
             pass
@@ -120,6 +120,10 @@ class OutputLock:
     @property
     def held(self) -> bool:
         return self._fd is not None
+
+
+def _same_file(a: os.stat_result, b: os.stat_result) -> bool:
+    return (a.st_dev, a.st_ino) == (b.st_dev, b.st_ino)
 
 
 def _read_pid(fd: int) -> int | None:

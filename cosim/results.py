@@ -134,7 +134,7 @@ class ResultWriter:
                 t = interval.t
                 line = [self._count, repr(float(t[0])), repr(float(t[-1])), interval.stages,
                         f"{interval.largest_residual:.6e}", f"{interval.wall_time:.6f}", interval.halvings]
-                self._diag.append((",".join(map(str, line)) + "\n").encode())
+                self._diag.append((",".join(map(str, line)) + "\n").encode(), self._ends_at)
             except OutputWriteError:
                 self.failed = True
                 raise
@@ -153,7 +153,11 @@ class ResultWriter:
                 self._close_files()
                 if self._npz and not self.failed:
                     _, _, data = read_stream(stream_path(self.path))
-                    write_npz(self.path, self.columns, self.units, data)
+                    try:
+                        write_npz(self.path, self.columns, self.units, data)
+                    except OutputWriteError as exc:
+                        raise OutputWriteError(f"{exc} (every sample is kept in {stream_path(self.path)}: "
+                                               f"`cosim recover {self.path}` builds the NPZ)") from None
                     stream_path(self.path).unlink()
             finally:
                 self._lock.release()

@@ -485,3 +485,27 @@ def test_a_signal_during_an_interval_write_waits_for_the_whole_interval(tmp_path
         writer.close()
     assert caught.value.exit_status == 143
     assert read_results(out)[1].shape == (5, 2) and len(diag_rows(out.with_name("w.csv.diag.csv"))) == 1
+
+
+def test_an_npz_that_cannot_be_built_keeps_its_stream_and_says_how_to_recover(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from cosim import results
+    from cosim.coupler.couplings import SignalRef
+    from cosim.coupler.relaxation import Interval
+
+    out = tmp_path / "w.npz"
+    writer = results.ResultWriter(out, [(SignalRef("m", "x"), 1)], {"m.x": "m"})
+    t = np.linspace(0.0, 1.0, 5)
+    writer.write(Interval(t, {"m": {"x": t[:, None] ** 2}}, {}, 2, {}))
+
+    def full(*args) -> None:
+        raise OutputWriteError(f"disk full writing {out}; free space or choose another place, then run again")
+
+    monkeypatch.setattr(results, "write_npz", full)
+    with pytest.raises(OutputWriteError, match=rf"kept in {stream_path(out)}: `cosim recover {out}`"):
+        writer.close()
+    monkeypatch.undo()
+    assert not out.exists() and stream_path(out).exists() and not out.with_name("w.npz.lock").exists()
+    assert "5 samples" in results.recover(out)
+    assert read_results(out)[1].shape == (5, 2)
