@@ -33,13 +33,13 @@ ENV = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT), os.e
 H, SAMPLES = 0.05, 5  # the oscillator's interval and samples per interval
 
 
-def alive(pid: int) -> bool:
+def alive(subsim: tuple[int, str]) -> bool:
+    """Is the subsim (pid, run id) still running? A pid reused by another process does not count."""
+    pid, run_id = subsim
     try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    try:  # an orphan that init has not reaped yet is dead too
-        return Path(f"/proc/{pid}/stat").read_text().split()[2] != "Z"
+        if run_id.encode() not in Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0"):
+            return False
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"  # a zombie is dead
     except (OSError, IndexError):
         return False
 
@@ -60,9 +60,10 @@ class Run:
         for line in self.proc.stderr:
             self.err.append(line)
 
-    def subsim_pids(self) -> list[int]:
-        """Pids the subsims announced ("<name>: serving run ... (pid N)")."""
-        return [int(line.rsplit("pid ", 1)[1].rstrip(")\n")) for line in list(self.err) if "serving run" in line]
+    def subsims(self) -> list[tuple[int, str]]:
+        """(pid, run id) of every subsim that announced itself ("<name>: serving run RUN via EP (pid N)")."""
+        return [(int(line.rsplit("pid ", 1)[1].rstrip(")\n")), line.split("serving run ", 1)[1].split()[0])
+                for line in list(self.err) if "serving run" in line]
 
     def wait(self, timeout: float = 120.0) -> int:
         self.proc.wait(timeout)
@@ -76,13 +77,13 @@ class Run:
         return [line.rstrip("\n") for line in self.err if "serving run" not in line]
 
     def cleanup(self) -> None:
-        pids = self.subsim_pids()
+        subsims = self.subsims()
         if self.proc.poll() is None:
             self.proc.kill()
         self.proc.wait()
-        for pid in pids:  # subsims this run started and left behind
-            if alive(pid):
-                os.kill(pid, signal.SIGKILL)
+        for subsim in subsims:  # subsims this run started and left behind
+            if alive(subsim):
+                os.kill(subsim[0], signal.SIGKILL)
 
 
 @pytest.fixture
@@ -144,7 +145,7 @@ def test_signal_stops_subsims_keeps_every_committed_interval_and_says_where(
     run = start(runs, "run", str(OSCILLATOR), "--stop", "1000", "--output", str(out))
     diag = out.with_name(out.name + ".diag.csv")
     wait_for_intervals(run, diag, 20)
-    subsims = run.subsim_pids()
+    subsims = run.subsims()
     assert len(subsims) == 2
     run.proc.send_signal(sig)
     assert run.wait() == 128 + sig
@@ -163,11 +164,16 @@ def test_sigkill_keeps_a_whole_csv_and_subsims_leave_by_themselves(tmp_path: Pat
     out = tmp_path / "killed.csv"
     run = start(runs, "run", str(OSCILLATOR), "--stop", "1000", "--output", str(out))
     wait_for_intervals(run, out.with_name(out.name + ".diag.csv"), 30)
-    subsims = run.subsim_pids()
+    subsims = run.subsims()
     assert len(subsims) == 2
     run.proc.kill()
     run.wait()
     killed = time.monotonic()
+    deadline = killed + 60  # a hang guard: the figure is printed, not asserted
+    while [p for p in subsims if alive(p)] and time.monotonic() < deadline:
+        time.sleep(0.02)
+    assert [p for p in subsims if alive(p)] == [], "subsims outlived their killed coordinator by 60 s"
+    print(f"subsims left {time.monotonic() - killed:.2f} s after their coordinator was SIGKILLed")
     data = assert_whole_intervals(out)
     assert data.shape[0] >= 1 + 4 * 30
     # the rows are those of an uninterrupted run: no interval's end row lost, none written twice
@@ -176,11 +182,6 @@ def test_sigkill_keeps_a_whole_csv_and_subsims_leave_by_themselves(tmp_path: Pat
                  "--quiet")
     assert done.returncode == 0, done.stderr
     np.testing.assert_allclose(data, read_results(ref)[1], rtol=0, atol=1e-12)
-    deadline = time.monotonic() + 60  # a hang guard: the figure is printed, not asserted
-    while [p for p in subsims if alive(p)] and time.monotonic() < deadline:
-        time.sleep(0.02)
-    assert [p for p in subsims if alive(p)] == [], "subsims outlived their killed coordinator by 60 s"
-    print(f"subsims left {time.monotonic() - killed:.2f} s after their coordinator was SIGKILLed")
 
 
 def test_sigkill_npz_is_rebuilt_by_cosim_recover(tmp_path: Path, runs: list[Run]) -> None:
