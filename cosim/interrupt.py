@@ -6,6 +6,7 @@ stop the subsims and finish the result files. Code that must not be cut in half 
 interval, building the NPZ) runs inside :func:`deferred`: a signal arriving there is raised when
 the block ends. Signals after the first are ignored: the run is already stopping, and a second
 Ctrl-C must not cut the cleanup short. The exit status is 128 + the signal number (130, 143, 129).
+A signal that was ignored when the run started (SIGHUP under ``nohup``) stays ignored.
 """
 
 from __future__ import annotations
@@ -56,9 +57,10 @@ def handling(signals: tuple[int, ...] = SIGNALS) -> Iterator[None]:
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    old = {s: signal.getsignal(s) for s in signals}
+    # a signal ignored when we started stays ignored: `nohup cosim run ...` must survive the hangup
+    old = {s: h for s in signals if (h := signal.getsignal(s)) is not signal.SIG_IGN}
     _State.active, _State.depth, _State.pending, _State.raised = True, 0, None, False
-    for s in signals:
+    for s in old:
         signal.signal(s, _handler)
     try:
         yield

@@ -16,7 +16,7 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import numpy as np
@@ -47,9 +47,9 @@ def alive(subsim: tuple[int, str]) -> bool:
 class Run:
     """``cosim ARGS`` as a background process; stderr collected by a thread (so it never blocks)."""
 
-    def __init__(self, *args: str) -> None:
+    def __init__(self, *args: str, preexec_fn: Callable[[], object] | None = None) -> None:
         self.proc = subprocess.Popen([*COSIM, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                                     env=ENV)
+                                     env=ENV, preexec_fn=preexec_fn)
         self.err: list[str] = []
         self.out = ""
         self._reader = threading.Thread(target=self._read, daemon=True)
@@ -94,8 +94,8 @@ def runs() -> Iterator[list[Run]]:
         r.cleanup()
 
 
-def start(runs: list[Run], *args: str) -> Run:
-    r = Run(*args)
+def start(runs: list[Run], *args: str, preexec_fn: Callable[[], object] | None = None) -> Run:
+    r = Run(*args, preexec_fn=preexec_fn)
     runs.append(r)
     return r
 
@@ -160,6 +160,19 @@ def test_signal_stops_subsims_keeps_every_committed_interval_and_says_where(
     data = assert_whole_intervals(out)
     assert data.shape[0] == 1 + (SAMPLES - 1) * len(committed) and data[-1, 0] == t_end
     assert not stream_path(out).exists() and not out.with_name(out.name + ".lock").exists()
+
+
+def test_under_nohup_a_hangup_does_not_stop_the_run(tmp_path: Path, runs: list[Run]) -> None:
+    out = tmp_path / "nohup.csv"
+    run = start(runs, "run", str(OSCILLATOR), "--stop", "1000", "--output", str(out), "--inprocess",
+                preexec_fn=lambda: signal.signal(signal.SIGHUP, signal.SIG_IGN))  # as nohup does
+    diag = out.with_name(out.name + ".diag.csv")
+    wait_for_intervals(run, diag, 5)
+    run.proc.send_signal(signal.SIGHUP)
+    n = len(diag_rows(diag))
+    wait_for_intervals(run, diag, n + 20)  # still committing after the hangup
+    run.proc.send_signal(signal.SIGINT)
+    assert run.wait() == 130
 
 
 def test_sigkill_keeps_a_whole_csv_and_subsims_leave_by_themselves(tmp_path: Path, runs: list[Run]) -> None:
