@@ -6,7 +6,7 @@
     python benchmarks/paper_runs.py --analyze-only       # re-read the result files in --out
 
 Runs go one after the other (so wall times compare) in the order unified, distributed, centralized for
-each case; results stream to ``<out>/case<N>-<method>.csv`` (+ ``.diag.csv``) and the timings to
+each case; results stream to ``<out>/case<N>-<method>.csv`` (+ ``.csv.diag.csv``) and the timings to
 ``<out>/timings.json``, so an interrupted benchmark can still be analysed (over the rows every run of a
 case has). Prints, per case:
 
@@ -49,7 +49,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from cosim.launch import Bus  # noqa: E402
-from cosim.results import read_results  # noqa: E402
+from cosim.results import diag_path, read_results  # noqa: E402
 from cosim.runner import run_scenario  # noqa: E402
 from cosim.scenario import Scenario, load  # noqa: E402
 from cosim.unified import run_unified  # noqa: E402
@@ -235,7 +235,7 @@ def report_case(case: int, out: Path, timings: dict, window: float, level: float
     print(f"\n=== case {case} ===")
     for method in METHODS:
         tm = timings.get(f"case{case}-{method}")
-        diag = out / f"case{case}-{method}.diag.csv"
+        diag = diag_path(out / f"case{case}-{method}.csv")
         if tm is None and not diag.exists():
             continue
         hist = stages_histogram(diag) if diag.exists() else Counter()
@@ -256,7 +256,7 @@ def report_case(case: int, out: Path, timings: dict, window: float, level: float
         if u and tm and tm["stop"] == u["stop"]:
             print(f"  speed {SHORT[method]}/RK-U: wall {tm['wall_s'] / u['wall_s']:.1f}x, "
                   f"cpu {tm['cpu_s'] / u['cpu_s']:.1f}x   (paper, CPU: {BARS[method]:g}x)")
-            diag = out / f"case{case}-{method}.diag.csv"
+            diag = diag_path(out / f"case{case}-{method}.csv")
             physics = timings.get(f"case{case}-physics_per_stage_s")
             if rtt and physics and tm["transport"] == "zenoh" and diag.exists() and tm["intervals"]:
                 hist = stages_histogram(diag)

@@ -3,13 +3,19 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+import zenoh
+
+from cosim import __version__, interrupt
 from cosim.contract import SubsimError
-from cosim.coupler.relaxation import METHODS, NotConverged
-from cosim.runner import open_session, run_scenario
+from cosim.coupler.relaxation import METHODS, Interval, NotConverged
+from cosim.outputs import OutputError, OutputWriteError
+from cosim.preflight import UsageError, check_listen, check_stop, zenoh_error_line
+from cosim.runner import default_output, open_session, run_scenario
 from cosim.scenario import ScenarioError, load
 
 # what `cosim run` runs with no scenario: the paper's satellite, case 1, RF-D over Zenoh, shortened
@@ -18,6 +24,22 @@ DEFAULT_STOP = 3000.0  # about a minute over Zenoh
 
 
 def _run(args: argparse.Namespace) -> int:
+    """``cosim run``. SIGINT, SIGTERM and SIGHUP stop it cleanly: the subsims are stopped, every committed
+    interval is in the results, one line says where it stopped, and the exit status is 128 + the signal."""
+    state: dict = {"t": None, "output": args.output}
+    try:
+        with interrupt.handling():
+            return _run_until_done(args, state)
+    except interrupt.Interrupted as exc:
+        if state["t"] is None:
+            where = "before any interval was committed"
+        else:
+            where = f"at t = {state['t']:.6g} s; every committed interval is in {state['output']}"
+        print(f"cosim: stopped by {exc.name} {where}", file=sys.stderr, flush=True)
+        return exc.exit_status
+
+
+def _run_until_done(args: argparse.Namespace, state: dict) -> int:
     if args.scenario is None:
         if not DEFAULT_SCENARIO.exists():
             raise ScenarioError(f"no scenario given and the default {DEFAULT_SCENARIO} is not there (installed "
@@ -28,14 +50,23 @@ def _run(args: argparse.Namespace) -> int:
               f"(the full paper run: cosim run scenarios/satellite/case1.toml)", file=sys.stderr)
         args.plot = True
     scenario = load(args.scenario)
-    if args.method == "unified":
+    check_stop(args.stop, scenario.start)
+    method = args.method or scenario.default_method
+    output = state["output"] = Path(args.output) if args.output is not None else default_output(scenario, method)
+
+    def committed(interval: Interval) -> None:
+        state["t"] = float(interval.t[-1])
+
+    if method == "unified":
         from cosim.unified import run_unified
 
-        report = run_unified(scenario, stop=args.stop, output=args.output)
+        report = run_unified(scenario, stop=args.stop, output=output, overwrite=args.overwrite, on_interval=committed)
     else:
-        report = run_scenario(scenario, method=args.method, stop=args.stop, output=args.output,
-                              inprocess=args.inprocess, listen=args.listen, progress=not args.quiet,
-                              restarts=args.restarts, timeout=args.timeout)
+        if not args.inprocess:
+            check_listen(args.listen)
+        report = run_scenario(scenario, method=method, stop=args.stop, output=output, inprocess=args.inprocess,
+                              listen=args.listen, progress=not args.quiet, on_interval=committed,
+                              overwrite=args.overwrite, restarts=args.restarts, timeout=args.timeout)
     s = report.summary
     hist = ", ".join(f"{k} stages: {v}" for k, v in sorted(s.stages.items()))
     print(f"{scenario.name} ({report.method}): {s.intervals} intervals to t = {s.t_end:.6g} in {s.wall_time:.2f} s"
@@ -50,6 +81,13 @@ def _run(args: argparse.Namespace) -> int:
 
         pngs = plot_files([report.output], report.output.parent / "plots")
         print(f"plots: {', '.join(str(p) for p in pngs)}")
+    return 0
+
+
+def _recover(args: argparse.Namespace) -> int:
+    from cosim.results import recover
+
+    print(recover(args.path))
     return 0
 
 
@@ -106,6 +144,7 @@ def _plot(args: argparse.Namespace) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="cosim", description=__doc__)
+    p.add_argument("--version", action="version", version=f"cosim {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
 
     r = sub.add_parser("run", help="run a scenario")
@@ -114,6 +153,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--plot", action="store_true", help="also write PNG plots beside the results")
     r.add_argument("--stop", type=float, help="stop time (default: the scenario's)")
     r.add_argument("--output", type=Path, help="result file, .csv or .npz (default: results/<name>-<method>.csv)")
+    r.add_argument("--overwrite", action="store_true", help="replace an existing result file (default: refuse)")
     r.add_argument("--method", choices=[*METHODS, "unified"], help="coupling method (default: the scenario's)")
     r.add_argument("--inprocess", action="store_true", help="run every subsim in this process (no Zenoh)")
     r.add_argument("--listen", default="tcp/127.0.0.1:0",
@@ -144,16 +184,34 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--window", nargs=2, type=float, metavar=("T0", "T1"),
                     help="plot only this time span (the paper's figs. 8-16: --window 40000 60000)")
     pl.set_defaults(fn=_plot)
+
+    rc = sub.add_parser("recover", help="make a result file whole after its coordinator was killed",
+                        description="NPZ: build it from the samples streamed to PATH.partial. CSV: cut a partial "
+                                    "last row. Refused while a run writes PATH.")
+    rc.add_argument("path", type=Path, help="the result file (.csv or .npz) the killed run was writing")
+    rc.set_defaults(fn=_recover)
     return p
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
-        return args.fn(args)
-    except ScenarioError as exc:
+        status = args.fn(args)
+        sys.stdout.flush()  # a closed pipe shows here, not at exit
+        return status
+    except BrokenPipeError:  # `cosim describe X | head -1`: the reader has what it wanted
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit
+        return 141  # 128 + SIGPIPE, as a program killed by the signal
+    except OutputWriteError as exc:  # the run stopped; its files end at the last whole interval
+        print(f"cosim: run stopped: {exc}", file=sys.stderr)
+        return 1
+    except (ScenarioError, OutputError, UsageError) as exc:
         print(f"cosim: {exc}", file=sys.stderr)
         return 2
+    except zenoh.ZError as exc:
+        line = zenoh_error_line(exc, getattr(args, "listen", ""))
+        print(f"cosim: {line}", file=sys.stderr)
+        return 2 if line.startswith("--listen") else 1
     except NotConverged as exc:
         print(f"cosim: run stopped: {exc}", file=sys.stderr)
         return 1

@@ -214,6 +214,7 @@ class Coordinator:
 
     def _drive(self, steps: Steps, on_interval: Callable[[Interval], None] | None) -> RunSummary | None:
         started = time.perf_counter()
+        restarts_before = len(self.restarts)
         reply: Outputs | None = None
         retry = False
         while True:
@@ -236,6 +237,7 @@ class Coordinator:
             elif isinstance(action, Commit):
                 self._uncommitted = set(self.handles)
                 action.interval.wall_time = time.perf_counter() - started
+                action.interval.restarts, restarts_before = len(self.restarts) - restarts_before, len(self.restarts)
                 self._journal_commit(action.interval)
                 if on_interval is not None:
                     on_interval(action.interval)

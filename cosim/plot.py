@@ -7,7 +7,9 @@
   draws with :func:`figure` and returns nothing for files that are not its own. This project registers
   the paper's satellite figures (``subsims/satellite/plots.py``).
 
-Lines are labelled with the file names. Long runs are drawn through a min/max envelope per pixel
+Lines are labelled with the file names; every axis with its unit (the subsims' port declarations,
+stored with the results: an NPZ's ``units``, a CSV's ``<name>.meta.json``). PNGs appear atomically
+(written under a temporary name, then renamed). Long runs are drawn through a min/max envelope per pixel
 column, so 600,000 samples plot fast and oscillations do not alias away. matplotlib is an optional
 dependency (``pip install 'cosim[plot]'``).
 """
@@ -24,9 +26,11 @@ from pathlib import Path
 
 import numpy as np
 
-from cosim.results import read_results
+from cosim.outputs import OutputError, atomic_write
+from cosim.results import read_results, read_units
 
 FIGURES_GROUP = "cosim.figures"
+SIDECARS = (".diag.csv", ".meta.json", ".lock", ".partial")  # files a run writes beside its results
 MAX_POINTS = 4000  # envelope buckets per line
 _COLUMN = re.compile(r"^(?P<signal>[^\[]+)\[(?P<index>\d+)\]$")
 
@@ -58,6 +62,10 @@ class Result:
             raise PlotError(f"{path}: not a cosim result file ({exc})") from None
         if not columns or columns[0] != "time":
             raise PlotError(f"{path}: not a cosim result file (first column must be 'time')")
+        if data.ndim != 2 or data.shape[0] == 0 or data.shape[1] != len(columns):
+            raise PlotError(f"{path}: no samples (the run stopped before its first interval was committed)")
+        if data.shape[0] == 1:
+            raise PlotError(f"{path}: only one sample (t = {data[0, 0]:g}): nothing to plot against time")
         self.path, self.label = path, path.stem
         self.t = data[:, 0]
         parts: dict[str, list[tuple[int, int]]] = {}
@@ -66,6 +74,9 @@ class Result:
             signal, index = (m["signal"], int(m["index"])) if m else (name, 0)
             parts.setdefault(signal, []).append((index, j))
         self.signals = {s: data[:, [j for _, j in sorted(cols)]] for s, cols in parts.items()}
+        units = read_units(path)
+        # unit of each signal (None: the file does not say; "" dimensionless)
+        self.units: dict[str, str | None] = {s: units.get(columns[cols[0][1]]) for s, cols in parts.items()}
 
     def window(self, t0: float | None, t1: float | None) -> None:
         """Keep the samples with t0 <= t <= t1 (None: open end)."""
@@ -121,9 +132,22 @@ def figure(results: Sequence[Result], series: list[np.ndarray], title: str, ylab
     axes[0, 0].legend(fontsize="small", loc="best")
     axes[-1, 0].set_xlabel("time (s)")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    try:
+        atomic_write(path, lambda f: fig.savefig(f, dpi=110, format="png"))
+    except OutputError as exc:
+        raise PlotError(str(exc)) from None
+    finally:
+        plt.close(fig)
     return path
+
+
+def unit_label(results: Sequence[Result], signal: str) -> str:
+    """`` (m)`` for the signal's unit in the files that state one, `` (-)`` if dimensionless, ``""`` if
+    none does (files from an older cosim)."""
+    units = list(dict.fromkeys(u for r in results if (u := r.units.get(signal)) is not None))
+    if not units:
+        return ""
+    return " (" + " | ".join(u or "-" for u in units) + ")"
 
 
 def figure_providers() -> list[tuple[str, Callable[[Sequence[Result], Path], list[Path]]]]:
@@ -163,8 +187,9 @@ def plot_signals(results: Sequence[Result], out: Path, wanted: Sequence[str] | N
             continue
         having = [r for r in results if signal in r.signals and r.signals[signal].shape[1] == size]
         name = re.sub(r"[^A-Za-z0-9_.-]", "_", signal)
+        unit = unit_label(having, signal)
         written.append(figure(having, [r.signals[signal][:, comps] for r in having], signal,
-                              [f"{signal}[{i}]" for i in comps], out / f"{name}.png"))
+                              [f"{signal}[{i}]{unit}" for i in comps], out / f"{name}.png"))
     return written
 
 
@@ -182,7 +207,10 @@ def plot_files(paths: Sequence[Path], out: Path, signals: Sequence[str] | None =
     empty = [r.label for r in results if r.t.size == 0]
     if empty:
         raise PlotError(f"no samples in {', '.join(empty)}{' inside the window' if window is not None else ''}")
-    out.mkdir(parents=True, exist_ok=True)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise PlotError(f"cannot create the plot directory {out} ({exc.strerror}): choose another --out") from None
     written = []
     if not signals:
         for _, figures in figure_providers():
@@ -195,15 +223,15 @@ def plot_files(paths: Sequence[Path], out: Path, signals: Sequence[str] | None =
 
 def plot_command(args: argparse.Namespace) -> int:
     """``cosim plot RESULTS... [--out DIR] [--signals ...]`` (and ``args.window`` = (t0, t1) if present)."""
-    paths = [p for p in args.results if not p.name.endswith(".diag.csv")]
+    paths = [p for p in args.results if not p.name.endswith(SIDECARS)]  # `cosim plot results/*` works
     for p in args.results:
         if p not in paths:
-            print(f"cosim plot: skipping diagnostics file {p}", file=sys.stderr)
+            print(f"cosim plot: skipping {p}, which belongs to a result file", file=sys.stderr)
     try:
         if not paths:
-            raise PlotError("no result files given (only diagnostics files)")
+            raise PlotError("no result files given (only the diagnostics, units, locks or streams beside them)")
         written = plot_files(paths, args.out, args.signals, getattr(args, "window", None))
-    except PlotError as exc:
+    except (PlotError, OutputError) as exc:
         print(f"cosim plot: {exc}", file=sys.stderr)
         return 2
     for path in written:

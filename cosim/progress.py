@@ -1,47 +1,74 @@
-"""Progress of a long run on stderr: percent, simulated time, intervals per second, stages."""
+"""Progress of a long run on stderr: percent, simulated time, rate, stages per interval, time left.
+
+Hand-written rather than ``rich`` or ``tqdm``: one line, redrawn in place, is all it needs; the
+rate and time left are in simulated seconds (which a generic iteration counter does not know),
+and it adds no dependency.
+"""
 
 from __future__ import annotations
 
 import sys
 import time
+from collections.abc import Callable
 from typing import TextIO
 
 from cosim.coupler.relaxation import Interval
 
 
-class Progress:
-    """On a terminal, one line redrawn twice a second; otherwise a line every 10 %."""
+def _clock(seconds: float) -> str:
+    s = int(round(seconds))
+    return f"{s // 3600}:{s // 60 % 60:02d}:{s % 60:02d}" if s >= 3600 else f"{s // 60}:{s % 60:02d}"
 
-    def __init__(self, t_start: float, t_stop: float, stream: TextIO = sys.stderr, enabled: bool = True) -> None:
-        self.t_start, self.t_stop, self.stream, self.enabled = t_start, t_stop, stream, enabled
+
+class Progress:
+    """On a terminal, one line redrawn at most twice a second and once more at the end (100 % when
+    the run finished). When the stream is not a terminal (a log file, a pipe), nothing: no redraws
+    pile up in logs, and the run's summary line says how it went."""
+
+    def __init__(self, t_start: float, t_stop: float, stream: TextIO = sys.stderr, enabled: bool = True,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self.t_start, self.t_stop, self.stream, self.clock = t_start, t_stop, stream, clock
         self.tty = hasattr(stream, "isatty") and stream.isatty()
-        self.started = self._shown = time.monotonic()
+        self.enabled = enabled and self.tty
+        self.started = clock()
+        self._shown = float("-inf")
         self.intervals = self.stages = 0
-        self._next_decile = 10
+        self.t = t_start
 
     def update(self, interval: Interval) -> None:
         self.intervals += 1
         self.stages += interval.stages
+        self.t = float(interval.t[-1])
         if not self.enabled:
             return
-        t = float(interval.t[-1])
-        pct = 100.0 * (t - self.t_start) / (self.t_stop - self.t_start)
-        now = time.monotonic()
-        if self.tty and now - self._shown >= 0.5:
+        now = self.clock()
+        if now - self._shown >= 0.5:
             self._shown = now
-            self.stream.write("\r" + self.line(t, pct, now) + "   ")
-            self.stream.flush()
-        elif not self.tty and pct >= self._next_decile:
-            self._next_decile = 10 * (int(pct) // 10 + 1)
-            self.stream.write(self.line(t, pct, now) + "\n")
-            self.stream.flush()
+            self._draw(now)
 
-    def line(self, t: float, pct: float, now: float) -> str:
-        rate = self.intervals / max(now - self.started, 1e-9)
-        return (f"{min(pct, 100.0):5.1f}%  t = {t:.6g} / {self.t_stop:.6g}  {rate:,.0f} intervals/s  "
-                f"{self.stages / max(self.intervals, 1):.2f} stages/interval")
+    def line(self, now: float) -> str:
+        """``  42.0%  t = 420 / 1000 s  8.4x real time  3.00 stages/interval  1:09 left``"""
+        span = self.t_stop - self.t_start
+        done = self.t - self.t_start
+        pct = min(100.0, 100.0 * done / span) if span > 0 else 100.0
+        wall = max(now - self.started, 1e-9)
+        rate = done / wall  # simulated seconds per wall second
+        if pct >= 100.0:
+            left = f"done in {_clock(wall)}"
+        elif rate > 0:
+            left = f"{_clock((self.t_stop - self.t) / rate)} left"
+        else:
+            left = "--:-- left"
+        return (f"{pct:5.1f}%  t = {self.t:.6g} / {self.t_stop:.6g} s  {rate:.3g}x real time  "
+                f"{self.stages / max(self.intervals, 1):.2f} stages/interval  {left}")
+
+    def _draw(self, now: float) -> None:
+        self.stream.write("\r" + self.line(now) + "\x1b[K")
+        self.stream.flush()
 
     def done(self) -> None:
-        if self.enabled and self.tty:
+        """The final state (100 % if the run reached its stop), and a newline."""
+        if self.enabled:
+            self._draw(self.clock())
             self.stream.write("\n")
             self.stream.flush()

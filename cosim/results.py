@@ -1,93 +1,266 @@
 """Result files: samples stream to disk as each interval commits, diagnostics beside them.
 
-CSV (``time,<subsim>.<output>[<i>],...``) is appended and flushed per interval, so an interrupted
-run keeps everything up to its last committed interval. NPZ (chosen by suffix) is written when
-the run ends, however it ends. Each interval contributes its samples but the last (which is the
-next interval's first); the run's final sample is written on close.
-Diagnostics: ``<stem>.diag.csv`` with one row per interval.
+CSV (``time,<subsim>.<output>[<i>],...``) is appended as each interval commits: every row of the
+interval, its end included (the next interval's first row, the same time, is skipped), in one
+``write``, so the file is complete up to the last committed interval at every moment, even if the
+coordinator is killed. Units go to ``<name>.meta.json`` beside it.
+
+NPZ (chosen by suffix; arrays ``columns``, ``units``, ``data``) streams the same rows as float64 to
+``<name>.partial`` and is built from it, atomically, when the run ends, however it ends; after a
+SIGKILL, ``cosim recover <name>.npz`` builds it.
+
+Diagnostics: ``<name>.diag.csv`` (``x.csv.diag.csv``, ``x.npz.diag.csv``), one row per interval.
+Disk full or another write error: :class:`~cosim.outputs.OutputError` (one line), and every file
+ends at its last whole interval. See :mod:`cosim.outputs` for the names, locks and atomic writes.
 """
 
 from __future__ import annotations
 
 import csv
-from collections.abc import Sequence
+import json
+import warnings
+from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from cosim import interrupt
 from cosim.coupler.couplings import SignalRef
 from cosim.coupler.relaxation import Interval
+from cosim.outputs import (
+    AppendFile,
+    OutputError,
+    OutputLock,
+    OutputWriteError,
+    atomic_write,
+    diag_path,
+    is_npz,
+    meta_path,
+    read_stream,
+    reserve_output,
+    stream_header,
+    stream_path,
+    write_npz,
+)
 
-DIAG_COLUMNS = ["interval", "t0", "t1", "stages", "largest_residual", "wall_time_s", "halvings"]
+if TYPE_CHECKING:
+    from cosim.handles import Description
+
+__all__ = ["DIAG_COLUMNS", "ResultWriter", "column_names", "diag_path", "output_units", "read_results",
+           "read_units", "recover"]
+
+DIAG_COLUMNS = ["interval", "t0", "t1", "stages", "largest_residual", "wall_time_s", "halvings", "restarts"]
 
 
 def column_names(signals: Sequence[tuple[SignalRef, int]]) -> list[str]:
     return ["time"] + [f"{ref}[{i}]" for ref, size in signals for i in range(size)]
 
 
-def diag_path(path: Path) -> Path:
-    return path.with_name(path.stem + ".diag.csv")
+def column_units(signals: Sequence[tuple[SignalRef, int]], units: Mapping[str, str] | None) -> list[str]:
+    """Unit of every column ("s" for time; "" where unknown or dimensionless)."""
+    units = units or {}
+    return ["s"] + [units.get(str(ref), "") for ref, size in signals for _ in range(size)]
+
+
+def output_units(descriptions: Mapping[str, Description]) -> dict[str, str]:
+    """``{"subsim.port": unit}`` of every output port, from the subsims' declarations."""
+    return {f"{n}.{p}": port.unit for n, d in descriptions.items() for p, port in d.outputs.items()}
 
 
 class ResultWriter:
-    def __init__(self, path: Path, signals: Sequence[tuple[SignalRef, int]]) -> None:
-        self.path, self.signals = path, list(signals)
+    """Streams committed intervals to ``path`` (.csv or .npz) and its diagnostics file.
+
+    ``lock``: the :class:`~cosim.outputs.OutputLock` taken (with the checks) before the run launched
+    anything; without one the writer takes it itself (replacing an existing file). The lock is released
+    by :meth:`close`.
+    """
+
+    def __init__(self, path: Path, signals: Sequence[tuple[SignalRef, int]],
+                 units: Mapping[str, str] | None = None, lock: OutputLock | None = None) -> None:
+        self.path, self.signals = Path(path), list(signals)
         self.columns = column_names(self.signals)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        self._npz = path.suffix == ".npz"
-        self._rows: list[np.ndarray] = []
-        self._last: np.ndarray | None = None
+        self.units = column_units(self.signals, units)
+        self._lock = lock if lock is not None else reserve_output(self.path, overwrite=True)
+        self._npz = is_npz(self.path)
+        self.t_last: float | None = None  # time of the last row written
+        self.rows_written = 0
+        self.failed = False
         self._count = 0
-        if not self._npz:
-            self._file = path.open("w", newline="")
-            self._csv = csv.writer(self._file)
-            self._csv.writerow(self.columns)
-        self._diag_file = diag_path(path).open("w", newline="")
-        self._diag = csv.writer(self._diag_file)
-        self._diag.writerow(DIAG_COLUMNS)
+        self._data: AppendFile | None = None
+        self._diag: AppendFile | None = None
+        try:
+            if self._npz:
+                self._data = AppendFile(stream_path(self.path), "the NPZ's streamed samples")
+                self._data.append(stream_header(self.columns, self.units))
+            else:
+                meta = {"format": "cosim results", "columns": self.columns, "units": self.units}
+                atomic_write(meta_path(self.path), lambda f: f.write(json.dumps(meta, indent=1).encode() + b"\n"))
+                self._data = AppendFile(self.path, "results")
+                self._data.append((",".join(self.columns) + "\n").encode())
+            self._diag = AppendFile(diag_path(self.path), "diagnostics")
+            self._diag.append((",".join(DIAG_COLUMNS) + "\n").encode())
+        except BaseException:  # nothing of this run is in the files yet: leave none behind
+            self.failed = True
+            self._close_files()
+            for f in (self._data, self._diag):
+                if f is not None:
+                    f.path.unlink(missing_ok=True)
+            if not self._npz:
+                meta_path(self.path).unlink(missing_ok=True)
+            self._lock.release()
+            raise
 
     def rows(self, interval: Interval) -> np.ndarray:
         parts = [interval.t[:, None]] + [interval.outputs[r.subsim][r.port] for r, _ in self.signals]
         return np.hstack(parts)
 
     def write(self, interval: Interval) -> None:
-        rows = self.rows(interval)
-        self._last = rows[-1]
+        """Append the interval's rows (all of them; a first row repeating the last written time is skipped)."""
+        with interrupt.deferred():  # a signal waits until the interval is written whole
+            rows = np.asarray(self.rows(interval), dtype=np.float64)
+            if self.t_last is not None and rows.shape[0] and rows[0, 0] == self.t_last:
+                rows = rows[1:]
+            assert self._data is not None and self._diag is not None, "write after close"
+            try:
+                if self._npz:
+                    self._data.append(rows.astype("<f8").tobytes(), self._ends_at)
+                else:
+                    self._data.append("".join(_fmt(r) for r in rows).encode(), self._ends_at)
+                if rows.shape[0]:
+                    self.t_last = float(rows[-1, 0])
+                self.rows_written += rows.shape[0]
+                self._count += 1
+                t = interval.t
+                line = [self._count, repr(float(t[0])), repr(float(t[-1])), interval.stages,
+                        f"{interval.largest_residual:.6e}", f"{interval.wall_time:.6f}", interval.halvings,
+                        interval.restarts]
+                self._diag.append((",".join(map(str, line)) + "\n").encode(), self._ends_at)
+            except OutputWriteError:
+                self.failed = True
+                raise
+
+    def _ends_at(self) -> str:
+        where = "no samples written" if self.t_last is None else f"results end at t = {self.t_last:.6g} s"
         if self._npz:
-            self._rows.append(rows[:-1])
-        else:
-            self._csv.writerows(map(_fmt, rows[:-1]))
-            self._file.flush()
-        self._count += 1
-        t = interval.t
-        self._diag.writerow([self._count, repr(float(t[0])), repr(float(t[-1])), interval.stages,
-                             f"{interval.largest_residual:.6e}", f"{interval.wall_time:.6f}", interval.halvings])
-        self._diag_file.flush()
+            where += f", kept in {stream_path(self.path)} (`cosim recover {self.path}` builds the NPZ)"
+        return where
 
     def close(self) -> None:
-        if self._npz:
-            data = np.vstack(self._rows + ([self._last[None, :]] if self._last is not None else []))
-            if data.size == 0:
-                data = np.empty((0, len(self.columns)))
-            np.savez(self.path, columns=np.array(self.columns), data=data)
-        else:
-            if self._last is not None:
-                self._csv.writerow(_fmt(self._last))
-            self._file.close()
-        self._diag_file.close()
+        """Finish every file (the NPZ from its stream, atomically) and release the lock. After a write
+        error the NPZ is not attempted: its stream stays for ``cosim recover``."""
+        with interrupt.deferred():
+            try:
+                self._close_files()
+                if self._npz and not self.failed:
+                    _, _, data = read_stream(stream_path(self.path))
+                    try:
+                        write_npz(self.path, self.columns, self.units, data)
+                    except OutputWriteError as exc:
+                        raise OutputWriteError(f"{exc} (every sample is kept in {stream_path(self.path)}: "
+                                               f"`cosim recover {self.path}` builds the NPZ)") from None
+                    stream_path(self.path).unlink()
+            finally:
+                self._lock.release()
+
+    def _close_files(self) -> None:
+        for f in (self._data, self._diag):
+            if f is not None:
+                f.close(sync=not self.failed)
 
 
-def _fmt(row: np.ndarray) -> list[str]:
-    return [repr(float(x)) for x in row]
+def _fmt(row: np.ndarray) -> str:
+    return ",".join(repr(float(x)) for x in row) + "\n"
 
 
 def read_results(path: str | Path) -> tuple[list[str], np.ndarray]:
-    """Columns and data (rows x columns) of a CSV or NPZ result file."""
+    """Columns and data (rows x columns) of a CSV or NPZ result file. ValueError for a torn last row."""
     path = Path(path)
     if path.suffix == ".npz":
         with np.load(path) as z:
             return [str(c) for c in z["columns"]], z["data"]
     with path.open() as f:
         columns = next(csv.reader(f))
-    data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+    with path.open("rb") as f:
+        f.seek(0, 2)
+        if f.tell() and (f.seek(-1, 2), f.read(1))[1] != b"\n":
+            raise ValueError(f"{path} ends in a partial row (an interrupted write): `cosim recover {path}` "
+                             "cuts it off")
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", "loadtxt: input contained no data")
+        data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+    if data.size == 0:
+        data = np.empty((0, len(columns)))
     return columns, data
+
+
+def read_units(path: str | Path) -> dict[str, str]:
+    """``{column: unit}`` of a result file: the NPZ's ``units``, or the CSV's ``.meta.json`` (empty if
+    the file has none, e.g. written by an older cosim)."""
+    path = Path(path)
+    try:
+        if path.suffix == ".npz":
+            with np.load(path) as z:
+                if "units" not in z.files:
+                    return {}
+                return dict(zip((str(c) for c in z["columns"]), (str(u) for u in z["units"])))
+        meta = json.loads(meta_path(path).read_text())
+        return dict(zip(meta["columns"], meta["units"]))
+    except (OSError, ValueError, KeyError, TypeError):
+        return {}
+
+
+def recover(path: Path) -> str:
+    """Make ``path`` whole after its coordinator was killed; returns what was done (one line).
+
+    NPZ: build it from ``<path>.partial`` (atomically) and remove the stream. CSV: cut a torn last row
+    (and one in the diagnostics). Raises OutputError if there is nothing to recover from or a run holds
+    the file.
+    """
+    path = Path(path)
+    lock = OutputLock.acquire(path)
+    try:
+        if is_npz(path):
+            stream = stream_path(path)
+            if not stream.exists():
+                if path.exists():
+                    return f"{path} is complete (no {stream.name} beside it): nothing to recover"
+                raise OutputError(f"neither {path} nor {stream} exists: nothing to recover")
+            try:
+                columns, units, data = read_stream(stream)
+            except (ValueError, KeyError) as exc:
+                raise OutputError(f"{stream}: cannot read it ({exc})") from None
+            write_npz(path, columns, units, data)
+            stream.unlink()
+            cut = _cut_torn_row(diag_path(path))
+            return f"{path}: {_span(data)} recovered from {stream.name}{cut}"
+        if not path.exists():
+            raise OutputError(f"{path} does not exist: nothing to recover")
+        cut = _cut_torn_row(path)
+        cut_diag = _cut_torn_row(diag_path(path))
+        try:
+            _, data = read_results(path)
+        except (ValueError, OSError) as exc:
+            raise OutputError(f"{path}: not a cosim result file ({exc})") from None
+        return f"{path}: {_span(data)}{cut or ' (complete)'}{cut_diag}"
+    finally:
+        lock.release()
+
+
+def _span(data: np.ndarray) -> str:
+    if data.shape[0] == 0:
+        return "no samples"
+    return f"{data.shape[0]} samples, t = {data[0, 0]:.6g} to {data[-1, 0]:.6g} s"
+
+
+def _cut_torn_row(path: Path) -> str:
+    """Truncate ``path`` after its last newline; returns a note if something was cut."""
+    if not path.exists():
+        return ""
+    raw = path.read_bytes()
+    end = raw.rfind(b"\n") + 1
+    if end == len(raw):
+        return ""
+    with path.open("r+b") as f:
+        f.truncate(end)
+    return f"; cut a partial last row ({len(raw) - end} bytes) from {path.name}"

@@ -10,6 +10,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from cosim import interrupt
 from cosim.contract import SubsimError
 from cosim.coupler.couplings import CouplingError, SignalRef
 from cosim.coupler.plan import Plan
@@ -17,8 +18,9 @@ from cosim.coupler.relaxation import Interval, RunSummary
 from cosim.driver import Coordinator, Deadline, Recovery, plan_for
 from cosim.handles import Description, InProcessHandle, SubsimHandle
 from cosim.launch import Bus, subsim_command
+from cosim.outputs import reserve_output
 from cosim.progress import Progress
-from cosim.results import ResultWriter, diag_path
+from cosim.results import ResultWriter, diag_path, output_units
 from cosim.scenario import Scenario, ScenarioError
 
 Log = Callable[[str], None]
@@ -157,15 +159,22 @@ def run_scenario(
     progress: bool = True,
     log: Log = _stderr,
     on_interval: Callable[[Interval], None] | None = None,
+    overwrite: bool = True,
     restarts: int | None = None,
     timeout: float | None = None,
 ) -> RunReport:
-    """Run ``scenario``; ``restarts`` and ``timeout`` override its [run] table (see ``cosim.scenario.KEYS``)."""
+    """Run ``scenario``. ``overwrite=False`` refuses an existing result (OutputError) before anything is
+    launched; ``restarts`` and ``timeout`` override its [run] table (see ``cosim.scenario.KEYS``)."""
     method = method or scenario.default_method
     settings = scenario.settings_for(method)
     stop = scenario.stop if stop is None else stop
     output = output or default_output(scenario, method)
-    session = open_session(scenario, inprocess=inprocess, listen=listen, log=log)
+    lock = reserve_output(output, overwrite)  # locked and checked before anything is launched
+    try:
+        session = open_session(scenario, inprocess=inprocess, listen=listen, log=log)
+    except BaseException:
+        lock.release()
+        raise
     try:
         spec = scenario.run
         restarts = spec.restarts if restarts is None else restarts
@@ -175,7 +184,8 @@ def run_scenario(
         deadline = Deadline(fixed=timeout if timeout is not None else spec.timeout)
         coordinator = Coordinator(session.handles, session.plans[method], settings, recovery=recovery,
                                   deadline=deadline)
-        writer = ResultWriter(output, output_signals(scenario, session.descriptions))
+        writer = ResultWriter(output, output_signals(scenario, session.descriptions),
+                              output_units(session.descriptions), lock=lock)
         bar = Progress(scenario.start, stop, enabled=progress)
 
         def each(interval: Interval) -> None:
@@ -192,4 +202,6 @@ def run_scenario(
         return RunReport(method, summary, output, diag_path(output), coordinator.order,
                          [str(c) for c in coordinator.feedback], {"restarts": coordinator.restarts})
     finally:
-        session.close()
+        with interrupt.deferred():  # a signal arriving now must not cut the subsims' stop short
+            session.close()
+        lock.release()  # if the writer never took it

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -23,7 +24,8 @@ import numpy as np
 
 from cosim.coupler.relaxation import Interval, RunSummary
 from cosim.importing import import_object
-from cosim.results import ResultWriter, diag_path
+from cosim.outputs import OutputLock, reserve_output
+from cosim.results import ResultWriter, diag_path, output_units
 from cosim.runner import RunReport, default_output, open_session, output_signals
 from cosim.scenario import Scenario, ScenarioError
 
@@ -41,13 +43,25 @@ def resolve_function(scenario: Scenario) -> Any:
     return fn
 
 
-def run_unified(scenario: Scenario, stop: float | None = None, output: Path | None = None) -> RunReport:
-    """Run the scenario's unified reference and write it like a coupled run. Raises ScenarioError."""
+def run_unified(scenario: Scenario, stop: float | None = None, output: Path | None = None,
+                overwrite: bool = True, on_interval: Callable[[Interval], None] | None = None) -> RunReport:
+    """Run the scenario's unified reference and write it like a coupled run. Raises ScenarioError, and
+    OutputError before computing anything if ``output`` cannot be written (or exists and not ``overwrite``)."""
+    resolve_function(scenario)
+    output = Path(output) if output is not None else default_output(scenario, "unified")
+    lock = reserve_output(output, overwrite)
+    try:
+        return _run_unified(scenario, stop, output, lock, on_interval)
+    finally:
+        lock.release()
+
+
+def _run_unified(scenario: Scenario, stop: float | None, output: Path, lock: OutputLock,
+                 on_interval: Callable[[Interval], None] | None) -> RunReport:
     fn = resolve_function(scenario)
     extra = dict(scenario.unified.params)
     settings = scenario.settings_for()
     stop = scenario.stop if stop is None else float(stop)
-    output = Path(output) if output is not None else default_output(scenario, "unified")
     H, m = settings.interval, settings.samples
     dt = H / (m - 1)
     start = scenario.start
@@ -59,6 +73,7 @@ def run_unified(scenario: Scenario, stop: float | None = None, output: Path | No
     session = open_session(scenario, inprocess=True)  # the coupled run's output ports and sizes
     try:
         signals = output_signals(scenario, session.descriptions)
+        units = output_units(session.descriptions)
     finally:
         session.close()
 
@@ -84,7 +99,7 @@ def run_unified(scenario: Scenario, stop: float | None = None, output: Path | No
         columns[str(ref)] = v
 
     summary = RunSummary(start)
-    writer = ResultWriter(output, signals)
+    writer = ResultWriter(output, signals, units, lock=lock)
     frac = np.arange(m) / (m - 1)
     try:
         for k in range(n_int):
@@ -98,6 +113,8 @@ def run_unified(scenario: Scenario, stop: float | None = None, output: Path | No
             interval = Interval(t, outputs, {}, 1, {}, wall_time=wall / n_int)
             writer.write(interval)
             summary.add(interval)
+            if on_interval is not None:
+                on_interval(interval)
     finally:
         writer.close()
     summary.wall_time = wall

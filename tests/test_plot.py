@@ -52,8 +52,10 @@ def generic_result(path: Path, shift: float = 0.0) -> Path:
 
 
 def test_satellite_figures(satellite_results: list[Path], tmp_path: Path) -> None:
-    diag = [p.with_name(p.stem + ".diag.csv") for p in satellite_results]  # as a shell glob would add them
-    args = argparse.Namespace(results=[*satellite_results, *diag], out=tmp_path / "png", signals=None)
+    # what `cosim plot results/*` passes: the diagnostics and units files beside the results (skipped)
+    beside = [p.with_name(p.name + s) for p in satellite_results for s in (".diag.csv", ".meta.json")]
+    assert all(p.exists() for p in beside)
+    args = argparse.Namespace(results=[*satellite_results, *beside], out=tmp_path / "png", signals=None)
     assert plot_command(args) == 0
     for name in ("satellite-euler", "satellite-rates", "satellite-altitude", "orbit.R", "orbit.V",
                  "attitude.phi", "attitude.omega", "aero.force", "aero.torque"):
@@ -135,3 +137,40 @@ def test_envelope_keeps_extremes_in_order() -> None:
     assert yy.max() == y.max() and yy.min() == y.min()
     small_t, small_y = envelope(t[:50], y[:50], points=1000)
     assert np.array_equal(small_t, t[:50]) and np.array_equal(small_y, y[:50])
+
+
+def test_every_axis_carries_the_unit_stored_with_the_results(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from cosim.runner import run_scenario
+
+    scenario = load(ROOT / "scenarios" / "oscillator.toml")
+    files = [run_scenario(scenario, stop=0.2, output=tmp_path / f"osc{s}", inprocess=True, progress=False).output
+             for s in (".csv", ".npz")]
+    labels: dict[str, list[str]] = {}
+    real_figure = cosim_plot.figure
+
+    def spy(results, series, title, ylabels, path, wrap=None):
+        labels[title] = list(ylabels)
+        return real_figure(results, series, title, ylabels, path, wrap)
+
+    monkeypatch.setattr(cosim_plot, "figure", spy)
+    for f in files:
+        labels.clear()
+        plot_files([f], tmp_path / "png")
+        assert labels == {"mass1.u": ["mass1.u[0] (m)"], "mass1.v": ["mass1.v[0] (m/s)"],
+                          "mass2.u": ["mass2.u[0] (m)"], "mass2.v": ["mass2.v[0] (m/s)"]}, f
+    labels.clear()
+    plot_files([generic_result(tmp_path / "old.csv")], tmp_path / "png")  # no units stored: none invented
+    assert labels["m1.u"] == ["m1.u[0]"]
+
+
+def test_a_png_appears_whole_or_not_at_all(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import matplotlib.figure
+
+    def dies_halfway(self, f, **kw) -> None:
+        f.write(b"\x89PNG half")
+        raise RuntimeError("renderer died")
+
+    monkeypatch.setattr(matplotlib.figure.Figure, "savefig", dies_halfway)
+    with pytest.raises(RuntimeError, match="renderer died"):
+        plot_files([generic_result(tmp_path / "a.csv")], tmp_path / "png")
+    assert list((tmp_path / "png").iterdir()) == []

@@ -80,6 +80,7 @@ class Interval:
     residuals: dict[str, list[float]]  # checked signal -> largest residual per checked stage
     wall_time: float = 0.0  # set by the driver (the machine reads no clock)
     halvings: int = 0
+    restarts: int = 0  # subsims the driver replaced during this interval
 
     @property
     def largest_residual(self) -> float:

@@ -15,10 +15,12 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Sequence
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 
+from cosim.outputs import atomic_write
 from cosim.results import read_results
 
 AXES = ("x", "y", "z")
@@ -89,7 +91,7 @@ def plot_files(paths: Sequence[Path], out: Path) -> list[Path]:
             ax.legend(fontsize=8)
             fig.tight_layout()
             path = out / f"{key}.png"
-            fig.savefig(path, dpi=110)
+            atomic_write(path, partial(fig.savefig, dpi=110, format="png"))  # whole or not at all
             written.append(path)
         plt.close(fig)
     return written

@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cosim.outputs import atomic_write
 from cosim.results import read_results
 
 DEG = 180.0 / np.pi
@@ -76,7 +77,7 @@ def _save(plt, fig, title: str, path: Path) -> Path:
     """The figure's title, and the PNG written to ``path``."""
     fig.suptitle(title)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    atomic_write(path, lambda f: fig.savefig(f, dpi=110, format="png"))  # whole or not at all
     plt.close(fig)
     return path
 

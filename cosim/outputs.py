@@ -1,0 +1,271 @@
+"""Result files on disk: their names, the lock a run holds on them, checks before launch, atomic writes.
+
+Every file of a run is named after its results file ``x.csv`` / ``x.npz``, so runs of one scenario
+into different files (or formats) never share one:
+
+* ``x.csv.diag.csv`` / ``x.npz.diag.csv``: per-interval diagnostics;
+* ``x.csv.meta.json``: columns and units of a CSV (an NPZ holds its own ``units``);
+* ``x.npz.partial``: the NPZ's samples streamed as each interval commits; the NPZ is built from it
+  when the run ends (then it is removed), or by ``cosim recover x.npz`` after the coordinator was
+  killed;
+* ``x.csv.lock`` / ``x.npz.lock``: held (``flock``) by the run writing the file, with its pid inside.
+
+The lock is an OS lock, so a run that died (even by SIGKILL) holds nothing: its lock file is taken
+over by the next run.
+"""
+
+from __future__ import annotations
+
+import errno
+import fcntl
+import json
+import os
+from collections.abc import Callable
+from pathlib import Path
+from typing import BinaryIO
+
+import numpy as np
+
+STREAM_MAGIC = b"COSIM-PARTIAL 1\n"
+
+
+class OutputError(RuntimeError):
+    """An output file cannot be used or written; the message is one actionable line."""
+
+
+class OutputWriteError(OutputError):
+    """Writing failed during the run (disk full, I/O error); the files end at their last whole interval."""
+
+
+def diag_path(path: Path) -> Path:
+    return path.with_name(path.name + ".diag.csv")
+
+
+def meta_path(path: Path) -> Path:
+    return path.with_name(path.name + ".meta.json")
+
+
+def stream_path(path: Path) -> Path:
+    return path.with_name(path.name + ".partial")
+
+
+def lock_path(path: Path) -> Path:
+    return path.with_name(path.name + ".lock")
+
+
+def is_npz(path: Path) -> bool:
+    return path.suffix == ".npz"
+
+
+def run_files(path: Path) -> list[Path]:
+    """Every file a run into ``path`` writes (besides its lock)."""
+    if is_npz(path):
+        return [path, stream_path(path), diag_path(path)]
+    return [path, meta_path(path), diag_path(path)]
+
+
+def describe_oserror(exc: OSError) -> str:
+    """``No space left on device`` etc.: the reason without Python's ``[Errno 28]``."""
+    return exc.strerror or str(exc)
+
+
+class OutputLock:
+    """An exclusive ``flock`` on ``<path>.lock`` (which holds the owner's pid). Released by :meth:`release`
+    or by the death of the process."""
+
+    def __init__(self, path: Path, fd: int) -> None:
+        self.path, self.file, self._fd = path, lock_path(path.resolve()), fd
+
+    @classmethod
+    def acquire(cls, path: Path) -> OutputLock:
+        """Lock ``path`` for this process; OutputError naming the holder if another live run has it.
+        The lock sits beside the file a symlink points to, so two names of one file share it."""
+        lock = lock_path(path.resolve())
+        for _ in range(20):  # the holder may remove the file between our open and our flock: then again
+            try:
+                fd = os.open(lock, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
+            except OSError as exc:
+                raise OutputError(f"cannot write {path}: cannot create {lock} ({describe_oserror(exc)}): "
+                                  "choose another --output") from None
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                holder = _read_pid(fd)
+                os.close(fd)
+                raise OutputError(f"{path} is being written by another cosim run (pid {holder or 'unknown'}, "
+                                  f"lock {lock}): wait for it to finish or choose another --output") from None
+            try:
+                same = _same_file(os.fstat(fd), os.stat(lock))
+            except FileNotFoundError:
+                same = False
+            if same:
+                os.ftruncate(fd, 0)
+                os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+                return cls(path, fd)
+            os.close(fd)  # we locked a file its holder had just removed: take the new one
+        raise OutputError(f"cannot lock {lock}: it keeps being replaced; is another program using it?")
+
+    def release(self) -> None:
+        """Remove the lock file and unlock; idempotent."""
+        if self._fd is None:
+            return
+        try:
+            if _same_file(os.fstat(self._fd), os.stat(self.file)):
+                os.unlink(self.file)
+        except OSError:
+            pass
+        os.close(self._fd)
+        self._fd = None
+
+    @property
+    def held(self) -> bool:
+        return self._fd is not None
+
+
+def _same_file(a: os.stat_result, b: os.stat_result) -> bool:
+    return (a.st_dev, a.st_ino) == (b.st_dev, b.st_ino)
+
+
+def _read_pid(fd: int) -> int | None:
+    try:
+        return int(os.pread(fd, 32, 0).split()[0])
+    except (OSError, ValueError, IndexError):
+        return None
+
+
+def reserve_output(path: Path, overwrite: bool = False) -> OutputLock:
+    """Before anything is launched: lock ``path``, refuse an existing result unless ``overwrite``, and
+    prove every file of the run can be created (by creating it: permission bits say nothing to root).
+
+    Raises OutputError (one line: what, and what to do). Nothing existing is modified.
+    """
+    path = Path(path)
+    if path.exists() and path.is_dir():
+        raise OutputError(f"--output {path} is a directory: give a file name ending in .csv or .npz")
+    for parent in [path.parent, *path.parent.parents]:
+        if parent.exists() and not parent.is_dir():
+            raise OutputError(f"cannot write {path}: {parent} is a file, not a directory: choose another --output")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(f"cannot create the directory {path.parent} for {path} ({describe_oserror(exc)}): "
+                          "choose another --output") from None
+    lock = OutputLock.acquire(path)
+    try:
+        if not overwrite:
+            for f in (path, stream_path(path)) if is_npz(path) else (path,):
+                if f.exists():
+                    hint = f"recover it with `cosim recover {path}`, " if f != path else ""
+                    raise OutputError(f"{f} exists: {hint}pass --overwrite to replace it, or choose another --output")
+        for f in run_files(path):
+            probe_writable(f)
+    except BaseException:
+        lock.release()
+        raise
+    return lock
+
+
+def probe_writable(path: Path) -> None:
+    """Create ``path`` and remove it again, or open an existing one for appending (writing nothing)."""
+    try:
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_CLOEXEC, 0o644)
+    except FileExistsError:
+        try:
+            fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CLOEXEC)
+        except OSError as exc:
+            raise OutputError(f"cannot write {path} ({describe_oserror(exc)}): choose another --output") from None
+        os.close(fd)
+        return
+    except OSError as exc:
+        raise OutputError(f"cannot create {path} ({describe_oserror(exc)}): choose another --output") from None
+    os.close(fd)
+    os.unlink(path)
+
+
+class AppendFile:
+    """A file written by whole records: each :meth:`append` is one ``write`` of complete rows, and a
+    failed one (disk full, I/O error) is cut back, so the file always ends at the last whole record."""
+
+    def __init__(self, path: Path, what: str) -> None:
+        self.path, self.what = path, what
+        try:
+            self.fd: int | None = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_CLOEXEC, 0o644)
+        except OSError as exc:
+            raise OutputError(f"cannot create {path} ({describe_oserror(exc)}): choose another --output") from None
+        self.size = 0
+
+    def append(self, data: bytes, ends_at: Callable[[], str] = lambda: "") -> None:
+        """Write ``data`` completely or not at all (as far as the file's length shows)."""
+        assert self.fd is not None, f"{self.path} is closed"
+        view, start = memoryview(data), self.size
+        try:
+            while view:
+                n = os.write(self.fd, view)
+                view = view[n:]
+                self.size += n
+        except OSError as exc:
+            try:
+                os.ftruncate(self.fd, start)
+                self.size = start
+            except OSError:
+                pass
+            where = ends_at()
+            reason = "disk full" if exc.errno in (errno.ENOSPC, errno.EDQUOT) else describe_oserror(exc)
+            raise OutputWriteError(f"{reason} writing {self.path} ({self.what}){': ' + where if where else ''}; "
+                              "free space or choose another --output, then run again") from None
+
+    def close(self, sync: bool = True) -> None:
+        if self.fd is None:
+            return
+        try:
+            if sync:
+                os.fsync(self.fd)
+        except OSError:
+            pass
+        finally:
+            os.close(self.fd)
+            self.fd = None
+
+
+def atomic_write(path: Path, write: Callable[[BinaryIO], None]) -> None:
+    """Write ``path`` under a temporary name in its directory, fsync, then rename: readers see the old
+    file or the whole new one. Raises OutputError (the temporary file is removed)."""
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    try:
+        with open(tmp, "wb") as f:
+            write(f)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except OSError as exc:
+        tmp.unlink(missing_ok=True)
+        reason = "disk full" if exc.errno in (errno.ENOSPC, errno.EDQUOT) else describe_oserror(exc)
+        raise OutputWriteError(f"{reason} writing {path}; free space or choose another place, then run again") \
+            from None
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+# --- the NPZ's streamed samples ------------------------------------------------------------------
+
+def stream_header(columns: list[str], units: list[str]) -> bytes:
+    return STREAM_MAGIC + json.dumps({"columns": columns, "units": units}).encode() + b"\n"
+
+
+def read_stream(path: Path) -> tuple[list[str], list[str], np.ndarray]:
+    """Columns, units and the whole rows of a ``.partial`` stream (a torn last row is left out)."""
+    with path.open("rb") as f:
+        if f.read(len(STREAM_MAGIC)) != STREAM_MAGIC:
+            raise ValueError(f"{path} is not a cosim sample stream")
+        head = json.loads(f.readline())
+        offset = f.tell()
+    columns, units = list(head["columns"]), list(head["units"])
+    n = (path.stat().st_size - offset) // (8 * len(columns))
+    data = np.fromfile(path, dtype="<f8", count=n * len(columns), offset=offset).reshape(n, len(columns))
+    return columns, units, data
+
+
+def write_npz(path: Path, columns: list[str], units: list[str], data: np.ndarray) -> None:
+    """The NPZ (``columns``, ``units``, ``data``), atomically."""
+    atomic_write(path, lambda f: np.savez(f, columns=np.array(columns), units=np.array(units), data=data))

@@ -1,0 +1,58 @@
+"""Checks of ``cosim run``'s arguments before anything is launched; each failure is one actionable line."""
+
+from __future__ import annotations
+
+import errno
+import math
+import re
+import socket
+
+
+class UsageError(ValueError):
+    """A command-line argument that cannot work; the message names it and what to do."""
+
+
+def check_stop(stop: float | None, start: float) -> None:
+    """``--stop`` must be a finite time after the scenario's start."""
+    if stop is None:
+        return
+    if not math.isfinite(stop) or stop <= start:
+        raise UsageError(f"--stop must be a finite time after the scenario's start ({start:g} s), got {stop:g}")
+
+
+_TCP = re.compile(r"^(?P<proto>tcp|udp)/(?:\[(?P<v6>[^\]]+)\]|(?P<host>[^:/\[\]]+)):(?P<port>\d+)(?:#.*)?$")
+
+
+def check_listen(endpoint: str) -> None:
+    """For ``tcp/HOST:PORT`` with a fixed port: the port must be free to listen on (port 0 is always)."""
+    m = _TCP.match(endpoint)
+    if m is None or m["proto"] != "tcp" or int(m["port"]) == 0:
+        return  # other locators: Zenoh says what is wrong with them
+    host, port = m["v6"] or m["host"], int(m["port"])
+    try:
+        infos = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)
+    except socket.gaierror as exc:
+        raise UsageError(f"--listen {endpoint}: cannot resolve {host!r} ({exc.strerror}): "
+                         "give an address of this machine, e.g. tcp/127.0.0.1:7447") from None
+    family, _, _, _, address = infos[0]
+    with socket.socket(family, socket.SOCK_STREAM) as s:
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as a listener would: TIME_WAIT is no conflict
+        try:
+            s.bind(address)
+            s.listen(1)
+        except OSError as exc:
+            if exc.errno == errno.EADDRINUSE:
+                raise UsageError(f"--listen {endpoint}: port {port} is already in use: stop what holds it "
+                                 f"(ss -ltnp 'sport = :{port}') or pick another port (port 0: any free one)") from None
+            raise UsageError(f"--listen {endpoint}: cannot listen there ({exc.strerror}): "
+                             "give an address of this machine and a free port") from None
+
+
+def zenoh_error_line(exc: BaseException, endpoint: str) -> str:
+    """A Zenoh error (a multi-line Rust report with source paths) as one line."""
+    text = " ".join(str(exc).split())
+    text = re.sub(r"\s*at /\S+\.rs:\d+\.?", "", text)
+    if "Address already in use" in text:
+        port = endpoint.rsplit(":", 1)[-1]
+        return f"--listen {endpoint}: port {port} is already in use: stop what holds it or pick another port"
+    return f"Zenoh: {text}"

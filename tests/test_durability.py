@@ -1,0 +1,527 @@
+"""Results survive interruption and are never silently damaged; the CLI's rough edges are one-line errors.
+
+Each behaviour is checked on ``cosim`` run as a real process, as a user runs it. Every process a test
+starts (and every subsim those start) is gone when the test ends, pass or fail.
+"""
+
+from __future__ import annotations
+
+import errno
+import json
+import os
+import pty
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cosim import __version__
+from cosim.outputs import AppendFile, OutputWriteError, atomic_write, stream_path
+from cosim.results import read_results, read_units
+
+ROOT = Path(__file__).parents[1]
+OSCILLATOR = ROOT / "scenarios" / "oscillator.toml"
+COSIM = [sys.executable, "-m", "cosim.cli"]
+ENV = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))}
+H, SAMPLES = 0.05, 5  # the oscillator's interval and samples per interval
+
+
+def alive(subsim: tuple[int, str]) -> bool:
+    """Is the subsim (pid, run id) still running? A pid reused by another process does not count."""
+    pid, run_id = subsim
+    try:
+        if run_id.encode() not in Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0"):
+            return False
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"  # a zombie is dead
+    except (OSError, IndexError):
+        return False
+
+
+class Run:
+    """``cosim ARGS`` as a background process; stderr collected by a thread (so it never blocks)."""
+
+    def __init__(self, *args: str, preexec_fn: Callable[[], object] | None = None) -> None:
+        self.proc = subprocess.Popen([*COSIM, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                     env=ENV, preexec_fn=preexec_fn)
+        self.err: list[str] = []
+        self.out = ""
+        self._reader = threading.Thread(target=self._read, daemon=True)
+        self._reader.start()
+
+    def _read(self) -> None:
+        assert self.proc.stderr is not None
+        for line in self.proc.stderr:
+            self.err.append(line)
+
+    def subsims(self) -> list[tuple[int, str]]:
+        """(pid, run id) of every subsim that announced itself ("<name>: serving run RUN via EP (pid N)")."""
+        return [(int(line.rsplit("pid ", 1)[1].rstrip(")\n")), line.split("serving run ", 1)[1].split()[0])
+                for line in list(self.err) if "serving run" in line]
+
+    def wait(self, timeout: float = 120.0) -> int:
+        self.proc.wait(timeout)
+        assert self.proc.stdout is not None
+        self.out = self.proc.stdout.read()  # small: the summary lines
+        self._reader.join(timeout)
+        return self.proc.returncode
+
+    def own_lines(self) -> list[str]:
+        """stderr lines of the coordinator (not the subsims' "serving" lines)."""
+        return [line.rstrip("\n") for line in self.err if "serving run" not in line]
+
+    def cleanup(self) -> None:
+        subsims = self.subsims()
+        if self.proc.poll() is None:
+            self.proc.kill()
+        self.proc.wait()
+        for subsim in subsims:  # subsims this run started and left behind
+            if alive(subsim):
+                os.kill(subsim[0], signal.SIGKILL)
+
+
+@pytest.fixture
+def runs() -> Iterator[list[Run]]:
+    started: list[Run] = []
+    yield started
+    for r in started:
+        r.cleanup()
+
+
+def start(runs: list[Run], *args: str, preexec_fn: Callable[[], object] | None = None) -> Run:
+    r = Run(*args, preexec_fn=preexec_fn)
+    runs.append(r)
+    return r
+
+
+def cosim(*args: str, timeout: float = 120.0, **kw) -> subprocess.CompletedProcess:
+    return subprocess.run([*COSIM, *args], capture_output=True, text=True, timeout=timeout, env=ENV, **kw)
+
+
+def diag_rows(path: Path) -> list[list[str]]:
+    if not path.exists():
+        return []
+    return [line.split(",") for line in path.read_text().splitlines()[1:]]
+
+
+def wait_for_intervals(run: Run, diag: Path, n: int, timeout: float = 120.0) -> None:
+    """Until ``n`` intervals are committed (a hang guard, not a measurement)."""
+    deadline = time.monotonic() + timeout
+    while len(diag_rows(diag)) < n:
+        assert run.proc.poll() is None, f"the run ended early: {''.join(run.err)}"
+        assert time.monotonic() < deadline, f"fewer than {n} intervals committed in {timeout:g} s"
+        time.sleep(0.05)
+
+
+def assert_whole_intervals(path: Path) -> np.ndarray:
+    """The result holds whole intervals: 1 + 4 k rows, each interval's end included, no time twice."""
+    if path.suffix == ".csv":
+        assert path.read_bytes().endswith(b"\n"), "a partial last row"
+    _, data = read_results(path)
+    t = data[:, 0]
+    assert (data.shape[0] - 1) % (SAMPLES - 1) == 0, data.shape
+    assert np.all(np.diff(t) > 0), "a time repeats or goes back"
+    assert t[-1] / H == pytest.approx(round(t[-1] / H)), "does not end at an interval end"
+    return data
+
+
+# --- A. interrupted coordinator --------------------------------------------------------------------
+
+@pytest.mark.parametrize(("sig", "suffix"), [
+    pytest.param(sig, suffix, id=f"{sig.name}-{suffix[1:]}")
+    for sig, suffix in [(signal.SIGINT, ".npz"), (signal.SIGTERM, ".csv"), (signal.SIGTERM, ".npz"),
+                        (signal.SIGHUP, ".csv"), (signal.SIGHUP, ".npz")]  # SIGINT-csv: test_cli.py
+])
+def test_signal_stops_subsims_keeps_every_committed_interval_and_says_where(
+    tmp_path: Path, runs: list[Run], sig: int, suffix: str
+) -> None:
+    out = tmp_path / f"osc{suffix}"
+    run = start(runs, "run", str(OSCILLATOR), "--stop", "1000", "--output", str(out))
+    diag = out.with_name(out.name + ".diag.csv")
+    wait_for_intervals(run, diag, 20)
+    subsims = run.subsims()
+    assert len(subsims) == 2
+    run.proc.send_signal(sig)
+    run.proc.wait(120)
+    # checked the moment the coordinator is gone: subsims it left would live on ~2 s (their watchdog)
+    assert [p for p in subsims if alive(p)] == [], "the coordinator exited without stopping its subsims"
+    assert run.wait() == 128 + sig
+    committed = diag_rows(diag)
+    t_end = float(committed[-1][2])
+    lines = run.own_lines()
+    assert lines == [f"cosim: stopped by {signal.Signals(sig).name} at t = {t_end:.6g} s; "
+                     f"every committed interval is in {out}"], lines
+    data = assert_whole_intervals(out)
+    assert data.shape[0] == 1 + (SAMPLES - 1) * len(committed) and data[-1, 0] == t_end
+    assert not stream_path(out).exists() and not out.with_name(out.name + ".lock").exists()
+
+
+def test_under_nohup_a_hangup_does_not_stop_the_run(tmp_path: Path, runs: list[Run]) -> None:
+    out = tmp_path / "nohup.csv"
+    run = start(runs, "run", str(OSCILLATOR), "--stop", "1000", "--output", str(out), "--inprocess",
+                preexec_fn=lambda: signal.signal(signal.SIGHUP, signal.SIG_IGN))  # as nohup does
+    diag = out.with_name(out.name + ".diag.csv")
+    wait_for_intervals(run, diag, 5)
+    run.proc.send_signal(signal.SIGHUP)
+    n = len(diag_rows(diag))
+    wait_for_intervals(run, diag, n + 20)  # still committing after the hangup
+    run.proc.send_signal(signal.SIGINT)
+    assert run.wait() == 130
+
+
+def test_sigkill_keeps_a_whole_csv_and_subsims_leave_by_themselves(tmp_path: Path, runs: list[Run]) -> None:
+    out = tmp_path / "killed.csv"
+    run = start(runs, "run", str(OSCILLATOR), "--stop", "1000", "--output", str(out))
+    wait_for_intervals(run, out.with_name(out.name + ".diag.csv"), 30)
+    subsims = run.subsims()
+    assert len(subsims) == 2
+    run.proc.kill()
+    run.proc.wait()  # not run.wait(): the subsims hold its stderr open until they exit
+    killed = time.monotonic()
+    deadline = killed + 60  # a hang guard: the figure is printed, not asserted
+    while [p for p in subsims if alive(p)] and time.monotonic() < deadline:
+        time.sleep(0.02)
+    assert [p for p in subsims if alive(p)] == [], "subsims outlived their killed coordinator by 60 s"
+    print(f"subsims left {time.monotonic() - killed:.2f} s after their coordinator was SIGKILLed")
+    data = assert_whole_intervals(out)
+    assert data.shape[0] >= 1 + 4 * 30
+    # the rows are those of an uninterrupted run: no interval's end row lost, none written twice
+    ref = tmp_path / "ref.csv"
+    done = cosim("run", str(OSCILLATOR), "--stop", f"{data[-1, 0]:.6g}", "--output", str(ref), "--inprocess",
+                 "--quiet")
+    assert done.returncode == 0, done.stderr
+    np.testing.assert_allclose(data, read_results(ref)[1], rtol=0, atol=1e-12)
+
+
+def test_sigkill_npz_is_rebuilt_by_cosim_recover(tmp_path: Path, runs: list[Run]) -> None:
+    out = tmp_path / "killed.npz"
+    run = start(runs, "run", str(OSCILLATOR), "--stop", "1000", "--output", str(out))
+    diag = out.with_name(out.name + ".diag.csv")
+    wait_for_intervals(run, diag, 30)
+    run.proc.kill()
+    run.wait()
+    assert not out.exists() and stream_path(out).exists()
+    n_committed = len(diag_rows(diag))
+    again = cosim("run", str(OSCILLATOR), "--stop", "1", "--output", str(out), "--inprocess")
+    assert again.returncode == 2 and f"cosim recover {out}" in again.stderr  # the samples are not overwritten
+    done = cosim("recover", str(out))
+    assert done.returncode == 0, done.stderr
+    assert str(out) in done.stdout and not stream_path(out).exists()
+    data = assert_whole_intervals(out)
+    assert data.shape[0] >= 1 + (SAMPLES - 1) * n_committed  # the results were written before the diagnostics
+    assert read_units(out)["mass1.v[0]"] == "m/s"
+    assert cosim("recover", str(out)).stdout.strip().endswith("nothing to recover")
+
+
+def test_recover_cuts_a_torn_csv_row(tmp_path: Path) -> None:
+    out = tmp_path / "torn.csv"
+    assert cosim("run", str(OSCILLATOR), "--stop", "0.2", "--output", str(out), "--inprocess").returncode == 0
+    with out.open("a") as f:
+        f.write("0.2125,0.12")  # what a write cut short would leave
+    with pytest.raises(ValueError, match="cosim recover"):
+        read_results(out)
+    done = cosim("recover", str(out))
+    assert done.returncode == 0 and "cut a partial last row" in done.stdout
+    assert_whole_intervals(out)
+
+
+# --- B. outputs never silently damaged ---------------------------------------------------------------
+
+def test_existing_result_is_refused_before_launch_unless_overwrite(tmp_path: Path) -> None:
+    out = tmp_path / "old.csv"
+    out.write_text("precious\n")
+    done = cosim("run", str(OSCILLATOR), "--stop", "0.1", "--output", str(out))
+    assert done.returncode == 2 and out.read_text() == "precious\n"
+    assert done.stderr.splitlines() == [f"cosim: {out} exists: pass --overwrite to replace it, or choose another "
+                                        "--output"]  # and no subsim announced itself: nothing was launched
+    done = cosim("run", str(OSCILLATOR), "--stop", "0.1", "--output", str(out), "--overwrite", "--quiet")
+    assert done.returncode == 0, done.stderr
+    assert_whole_intervals(out)
+
+
+def test_a_second_run_on_the_same_file_is_refused_naming_the_first(tmp_path: Path, runs: list[Run]) -> None:
+    out = tmp_path / "shared.csv"
+    first = start(runs, "run", str(OSCILLATOR), "--stop", "1000", "--output", str(out), "--inprocess")
+    wait_for_intervals(first, out.with_name(out.name + ".diag.csv"), 5)
+    second = cosim("run", str(OSCILLATOR), "--stop", "1", "--output", str(out), "--overwrite")
+    assert second.returncode == 2
+    assert second.stderr.splitlines() == [f"cosim: {out} is being written by another cosim run (pid {first.proc.pid}, "
+                                          f"lock {out}.lock): wait for it to finish or choose another --output"]
+    alias = tmp_path / "alias.csv"
+    alias.symlink_to(out)  # another name of the same file
+    third = cosim("run", str(OSCILLATOR), "--stop", "1", "--output", str(alias), "--overwrite", "--inprocess")
+    assert third.returncode == 2 and f"pid {first.proc.pid}" in third.stderr
+    first.proc.send_signal(signal.SIGINT)
+    assert first.wait() == 130
+    assert_whole_intervals(out)  # the first run's file is intact
+
+
+def test_a_stale_lock_of_a_dead_run_is_taken_over(tmp_path: Path) -> None:
+    out = tmp_path / "stale.csv"
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    out.with_name(out.name + ".lock").write_text(f"{dead.pid}\n")  # as a SIGKILLed run leaves it
+    done = cosim("run", str(OSCILLATOR), "--stop", "0.1", "--output", str(out), "--inprocess", "--quiet")
+    assert done.returncode == 0, done.stderr
+    assert not out.with_name(out.name + ".lock").exists()
+
+
+def test_csv_and_npz_runs_of_one_scenario_have_their_own_diagnostics(tmp_path: Path) -> None:
+    for suffix, method in ((".csv", "distributed"), (".npz", "centralized")):
+        done = cosim("run", str(OSCILLATOR), "--stop", "0.1", "--output", str(tmp_path / f"x{suffix}"),
+                     "--inprocess", "--quiet", "--method", method)
+        assert done.returncode == 0, done.stderr
+        assert f"diagnostics: {tmp_path / f'x{suffix}.diag.csv'}" in done.stdout
+    csv_diag, npz_diag = diag_rows(tmp_path / "x.csv.diag.csv"), diag_rows(tmp_path / "x.npz.diag.csv")
+    assert len(csv_diag) == len(npz_diag) == 2 and csv_diag != npz_diag  # different methods, different stages
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["x.csv", "x.csv.diag.csv", "x.csv.meta.json", "x.npz",
+                                                          "x.npz.diag.csv"]
+
+
+@pytest.fixture
+def mount_tmpfs(tmp_path: Path) -> Iterator:
+    """``mount_tmpfs(options)`` -> a fresh tmpfs directory (root only); unmounted after the test, pass or fail."""
+    if os.geteuid() != 0:
+        pytest.skip("mounting a tmpfs needs root")
+    mounted: list[Path] = []
+
+    def mount(options: str) -> Path:
+        where = tmp_path / f"mnt{len(mounted)}"
+        where.mkdir()
+        done = subprocess.run(["mount", "-t", "tmpfs", "-o", options, "tmpfs", str(where)], capture_output=True)
+        if done.returncode != 0:
+            pytest.skip(f"cannot mount a tmpfs here: {done.stderr.decode().strip()}")
+        mounted.append(where)
+        return where
+
+    try:
+        yield mount
+    finally:
+        for where in mounted:
+            subprocess.run(["umount", "-l", str(where)], check=False)
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".npz"])
+def test_disk_full_is_one_error_and_the_file_ends_at_a_whole_interval(mount_tmpfs, suffix: str) -> None:
+    out = mount_tmpfs("size=64k") / f"full{suffix}"
+    done = cosim("run", str(OSCILLATOR), "--stop", "1000", "--output", str(out), "--inprocess", "--quiet")
+    assert done.returncode == 1
+    lines = done.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("cosim: run stopped: disk full writing "), lines
+    if suffix == ".csv":
+        data = assert_whole_intervals(out)
+        assert f"results end at t = {data[-1, 0]:.6g} s" in lines[0]
+    else:  # the NPZ cannot be built on a full disk: the stream keeps every whole row, and says how to rebuild
+        assert not out.exists() and f"cosim recover {out}" in lines[0]
+        raw = stream_path(out).read_bytes()
+        assert (len(raw) - raw.index(b"\n", 16) - 1) % (8 * 5) == 0
+
+
+def test_read_only_output_is_refused_before_launch(mount_tmpfs) -> None:
+    out = mount_tmpfs("ro,size=64k") / "x.csv"  # root ignores permission bits, not a read-only mount
+    done = cosim("run", str(OSCILLATOR), "--stop", "0.1", "--output", str(out))
+    assert done.returncode == 2
+    assert done.stderr.splitlines() == [f"cosim: cannot write {out}: cannot create {out}.lock (Read-only file "
+                                        "system): choose another --output"]
+
+
+def test_an_append_cut_short_by_enospc_leaves_the_file_at_its_last_record(tmp_path: Path,
+                                                                         monkeypatch: pytest.MonkeyPatch) -> None:
+    f = AppendFile(tmp_path / "a.csv", "results")
+    f.append(b"time,x\n0.0,1.0\n")
+    real_write = os.write
+
+    def half_then_full(fd: int, data) -> int:
+        if len(data) > 4:
+            return real_write(fd, bytes(data[: len(data) // 2]))
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr("cosim.outputs.os.write", half_then_full)
+    with pytest.raises(OutputWriteError, match=r"^disk full writing .*a\.csv \(results\): at t = 0"):
+        f.append(b"0.5,2.0\n1.0,3.0\n", lambda: "at t = 0")
+    monkeypatch.undo()
+    f.close()
+    assert (tmp_path / "a.csv").read_bytes() == b"time,x\n0.0,1.0\n"
+
+
+def test_atomic_write_leaves_the_old_file_or_the_whole_new_one(tmp_path: Path) -> None:
+    target = tmp_path / "r.npz"
+    target.write_bytes(b"old")
+
+    def dies_halfway(f) -> None:
+        f.write(b"half of the new")
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        atomic_write(target, dies_halfway)
+    assert target.read_bytes() == b"old" and [p.name for p in tmp_path.iterdir()] == ["r.npz"]
+    atomic_write(target, lambda f: f.write(b"new"))
+    assert target.read_bytes() == b"new" and [p.name for p in tmp_path.iterdir()] == ["r.npz"]
+
+
+def test_units_from_port_declarations_are_stored_with_both_formats(tmp_path: Path) -> None:
+    for suffix in (".csv", ".npz"):
+        out = tmp_path / f"u{suffix}"
+        assert cosim("run", str(OSCILLATOR), "--stop", "0.1", "--output", str(out), "--inprocess").returncode == 0
+        assert read_units(out) == {"time": "s", "mass1.u[0]": "m", "mass1.v[0]": "m/s", "mass2.u[0]": "m",
+                                   "mass2.v[0]": "m/s"}
+    meta = json.loads((tmp_path / "u.csv.meta.json").read_text())
+    assert meta["columns"] == read_results(tmp_path / "u.csv")[0]
+
+
+# --- C. CLI rough edges ------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("stop", ["-1", "0", "nan", "inf"])
+def test_stop_must_be_finite_and_after_the_start(tmp_path: Path, stop: str) -> None:
+    done = cosim("run", str(OSCILLATOR), f"--stop={stop}", "--output", str(tmp_path / "x.csv"))
+    assert done.returncode == 2
+    assert done.stderr.splitlines() == [f"cosim: --stop must be a finite time after the scenario's start (0 s), "
+                                        f"got {float(stop):g}"]
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("where", ["under_a_file", "a_directory"])
+def test_unwritable_output_is_one_line_naming_it(tmp_path: Path, where: str) -> None:
+    (tmp_path / "file").write_text("")
+    out = tmp_path / "file" / "x.csv" if where == "under_a_file" else tmp_path
+    done = cosim("run", str(OSCILLATOR), "--stop", "0.1", "--output", str(out))
+    assert done.returncode == 2
+    lines = done.stderr.splitlines()
+    assert len(lines) == 1 and str(out) in lines[0] and "--output" in lines[0], lines
+
+
+def test_listen_port_in_use_is_one_line_naming_the_port(tmp_path: Path) -> None:
+    with socket.socket() as held:
+        held.bind(("127.0.0.1", 0))
+        held.listen(1)
+        port = held.getsockname()[1]
+        done = cosim("run", str(OSCILLATOR), "--stop", "0.1", "--output", str(tmp_path / "x.csv"),
+                     "--listen", f"tcp/127.0.0.1:{port}")
+    assert done.returncode == 2
+    lines = done.stderr.splitlines()
+    assert len(lines) == 1 and f"port {port} is already in use" in lines[0] and "pick another port" in lines[0]
+
+
+def test_describe_into_a_closed_pipe_exits_quietly() -> None:
+    read, write = os.pipe()
+    os.close(read)  # like `| head -1` once head has gone
+    try:
+        done = subprocess.run([*COSIM, "describe", str(OSCILLATOR)], stdout=write, stderr=subprocess.PIPE,
+                              text=True, timeout=60, env=ENV)
+    finally:
+        os.close(write)
+    assert done.returncode == 141 and done.stderr == ""
+
+
+def test_version() -> None:
+    done = cosim("--version")
+    assert done.returncode == 0 and done.stdout.strip() == f"cosim {__version__}"
+
+
+def test_progress_on_a_terminal_shows_time_rate_and_time_left_and_ends_at_100(tmp_path: Path) -> None:
+    master, slave = pty.openpty()
+    proc = subprocess.Popen([*COSIM, "run", str(OSCILLATOR), "--stop", "2", "--inprocess", "--output",
+                             str(tmp_path / "p.csv")], stdout=subprocess.PIPE, stderr=slave, env=ENV)
+    os.close(slave)
+    chunks: list[bytes] = []
+
+    def drain() -> None:
+        while True:
+            try:
+                data = os.read(master, 4096)
+            except OSError:  # EIO: every writer of the terminal has closed it
+                return
+            if not data:
+                return
+            chunks.append(data)
+
+    reader = threading.Thread(target=drain, daemon=True)
+    reader.start()
+    try:
+        proc.communicate(timeout=120)
+        reader.join(30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        os.close(master)
+    assert proc.returncode == 0
+    text = b"".join(chunks).decode().replace("\r\n", "\n")  # the terminal turns \n into \r\n
+    frames = [f.strip() for f in text.replace("\x1b[K", "").split("\r")]
+    first, last = frames[1], frames[-1]
+    assert "t = 0.05 / 2 s" in first and "x real time" in first and "left" in first, first
+    assert last.startswith("100.0%  t = 2 / 2 s") and "done in" in last, last
+
+
+def test_progress_is_silent_when_stderr_is_not_a_terminal(tmp_path: Path) -> None:
+    done = cosim("run", str(OSCILLATOR), "--stop", "2", "--inprocess", "--output", str(tmp_path / "q.csv"))
+    assert done.returncode == 0 and done.stderr == ""
+
+
+@pytest.mark.parametrize("rows", [0, 1])
+def test_plot_of_an_empty_or_one_row_result_is_a_clear_error(tmp_path: Path, rows: int) -> None:
+    pytest.importorskip("matplotlib")
+    path = tmp_path / "r.csv"
+    path.write_text("time,m.x[0]\n" + "0.0,1.0\n" * rows)
+    done = cosim("plot", str(path), "--out", str(tmp_path / "png"))
+    assert done.returncode == 2
+    expected = "no samples" if rows == 0 else "only one sample (t = 0): nothing to plot against time"
+    assert done.stderr.splitlines() == [f"cosim plot: {path}: {expected}" + (
+        " (the run stopped before its first interval was committed)" if rows == 0 else "")]
+
+
+def test_a_signal_during_an_interval_write_waits_for_the_whole_interval(tmp_path: Path,
+                                                                        monkeypatch: pytest.MonkeyPatch) -> None:
+    from cosim import interrupt
+    from cosim.coupler.couplings import SignalRef
+    from cosim.coupler.relaxation import Interval
+    from cosim.results import ResultWriter
+
+    out = tmp_path / "w.csv"
+    writer = ResultWriter(out, [(SignalRef("m", "x"), 1)], {"m.x": "m"})
+    real_append = AppendFile.append
+
+    def signalled_append(self, data, *args) -> None:  # SIGTERM arrives between the rows and the diagnostics
+        real_append(self, data, *args)
+        if self.what == "results":
+            os.kill(os.getpid(), signal.SIGTERM)
+
+    monkeypatch.setattr(AppendFile, "append", signalled_append)
+    t = np.linspace(0.0, 1.0, 5)
+    with interrupt.handling():
+        with pytest.raises(interrupt.Interrupted) as caught:
+            writer.write(Interval(t, {"m": {"x": t[:, None] ** 2}}, {}, 2, {}))
+        os.kill(os.getpid(), signal.SIGHUP)  # while stopping, a second signal changes nothing
+        writer.close()
+    assert caught.value.exit_status == 143
+    assert read_results(out)[1].shape == (5, 2) and len(diag_rows(out.with_name("w.csv.diag.csv"))) == 1
+
+
+def test_an_npz_that_cannot_be_built_keeps_its_stream_and_says_how_to_recover(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from cosim import results
+    from cosim.coupler.couplings import SignalRef
+    from cosim.coupler.relaxation import Interval
+
+    out = tmp_path / "w.npz"
+    writer = results.ResultWriter(out, [(SignalRef("m", "x"), 1)], {"m.x": "m"})
+    t = np.linspace(0.0, 1.0, 5)
+    writer.write(Interval(t, {"m": {"x": t[:, None] ** 2}}, {}, 2, {}))
+
+    def full(*args) -> None:
+        raise OutputWriteError(f"disk full writing {out}; free space or choose another place, then run again")
+
+    monkeypatch.setattr(results, "write_npz", full)
+    with pytest.raises(OutputWriteError, match=rf"kept in {stream_path(out)}: `cosim recover {out}`"):
+        writer.close()
+    monkeypatch.undo()
+    assert not out.exists() and stream_path(out).exists() and not out.with_name("w.npz.lock").exists()
+    assert "5 samples" in results.recover(out)
+    assert read_results(out)[1].shape == (5, 2)
