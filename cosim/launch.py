@@ -104,6 +104,9 @@ class Bus:
             env=env,
             stdout=subprocess.DEVNULL if quiet else None,
             stderr=subprocess.DEVNULL if quiet else None,
+            # its own process group: a Ctrl-C at the terminal reaches the coordinator only, which stops its
+            # subsims in order (they would otherwise each print their own stop line)
+            process_group=0,
         )
         handle = RemoteHandle(self.session, self.run, name, timeout=timeout)
         proc = SubsimProcess(name, popen, handle, module, model, lease)
