@@ -255,7 +255,7 @@ def test_scenarios_hold_the_cases_params(case: str) -> None:
     torque = next(c for c in sc.couplings if str(c.target) == "attitude.torque")
     assert dict(torque.params) == PARAMS[case]["transfer"]
     assert sc.default_method == "distributed" and sc.stop == 60000.0
-    assert sc.unified == "subsims.satellite.reference:unified_scenario"
+    assert sc.unified is not None and sc.unified.function == "subsims.satellite.reference:unified_scenario"
     c, d = sc.settings_for("centralized"), sc.settings_for("distributed")
     assert (c.tol.rel, c.tol.abs, d.tol.rel, d.tol.abs) == (1e-12, 1e-12, 1e-14, 1e-14)
     assert list(d.order) == ["orbit", "attitude", "aero"]
