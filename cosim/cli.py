@@ -9,6 +9,7 @@ from pathlib import Path
 
 from cosim.contract import SubsimError
 from cosim.coupler.relaxation import METHODS, NotConverged
+from cosim.protocol.security import Security
 from cosim.runner import open_session, run_scenario
 from cosim.scenario import ScenarioError, load
 
@@ -34,7 +35,8 @@ def _run(args: argparse.Namespace) -> int:
         report = run_unified(scenario, stop=args.stop, output=args.output)
     else:
         report = run_scenario(scenario, method=args.method, stop=args.stop, output=args.output,
-                              inprocess=args.inprocess, listen=args.listen, progress=not args.quiet)
+                              inprocess=args.inprocess, listen=args.listen, progress=not args.quiet,
+                              security=_security(args, scenario.security))
     s = report.summary
     hist = ", ".join(f"{k} stages: {v}" for k, v in sorted(s.stages.items()))
     print(f"{scenario.name} ({report.method}): {s.intervals} intervals to t = {s.t_end:.6g} in {s.wall_time:.2f} s"
@@ -48,6 +50,17 @@ def _run(args: argparse.Namespace) -> int:
         pngs = plot_files([report.output], report.output.parent / "plots")
         print(f"plots: {', '.join(str(p) for p in pngs)}")
     return 0
+
+
+def _security(args: argparse.Namespace, default: Security | None) -> Security | None:
+    """--tls-*/--auth-file/--mutual-tls replace the scenario's [security] table when any is given."""
+    given = {k: getattr(args, k) for k in ("tls_cert", "tls_key", "tls_ca", "auth_file") if getattr(args, k)}
+    if not given and not args.mutual_tls:
+        return default
+    try:
+        return Security(**given, mutual=args.mutual_tls).check()
+    except ValueError as exc:
+        raise ScenarioError(str(exc)) from None
 
 
 def _ports(ports: dict) -> str:
@@ -116,6 +129,12 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--listen", default="tcp/127.0.0.1:0",
                    help="router endpoint (default: loopback, free port; use tcp/0.0.0.0:7447 for other machines)")
     r.add_argument("--quiet", action="store_true", help="no progress display")
+    r.add_argument("--tls-cert", type=Path, help="router certificate (PEM); listen on tls/<host>:<port> (see "
+                   "docs/reliability.md)")
+    r.add_argument("--tls-key", type=Path, help="private key of --tls-cert (PEM)")
+    r.add_argument("--tls-ca", type=Path, help="CA certificate that signed --tls-cert (given to launched subsims)")
+    r.add_argument("--mutual-tls", action="store_true", help="subsims must present certificates signed by --tls-ca")
+    r.add_argument("--auth-file", type=Path, help="'user:password' lines that may log in to the router")
     r.set_defaults(fn=_run)
 
     d = sub.add_parser("describe", help="print subsims, couplings, execution order and feedback edges")

@@ -16,8 +16,9 @@ from cosim.coupler.plan import Plan
 from cosim.coupler.relaxation import Interval, RunSummary
 from cosim.driver import Coordinator, plan_for
 from cosim.handles import Description, InProcessHandle, SubsimHandle
-from cosim.launch import Bus, subsim_command
+from cosim.launch import Bus
 from cosim.progress import Progress
+from cosim.protocol.security import Security
 from cosim.results import ResultWriter, diag_path
 from cosim.scenario import Scenario, ScenarioError
 
@@ -63,8 +64,11 @@ def open_session(
     external_wait: float = 300.0,
     log: Log = _stderr,
     timeout: float = 120.0,
+    security: Security | None = None,
 ) -> Session:
-    """Launch (or attach to) and configure every subsim. The caller must ``close()`` the session."""
+    """Launch (or attach to) and configure every subsim. The caller must ``close()`` the session.
+
+    ``security``: TLS and login files (else the scenario's ``[security]`` table, else loopback defaults)."""
     handles: dict[str, SubsimHandle] = {}
     bus = None
     if inprocess:
@@ -73,15 +77,20 @@ def open_session(
                 raise ScenarioError(f"{scenario.path}: [subsims.{name}] is external: cannot run it --inprocess")
             handles[name] = InProcessHandle(spec.model_class()(), name)
     else:
-        bus = Bus.open(listen)
+        try:
+            bus = Bus.open(listen, security=security or scenario.security)
+        except ValueError as exc:
+            raise ScenarioError(f"{scenario.path}: [security] {exc}") from None
     session = Session(scenario, handles, {}, bus)
     try:
         if bus is not None:
             for name, spec in scenario.subsims.items():
                 if spec.external:
-                    cmd = subsim_command("<your.subsim.module>", bus.endpoint, bus.run, name, spec.model)
+                    cmd = bus.command("<your.subsim.module>", name, spec.model)
+                    env = " ".join(f"{k}={v}" for k, v in bus.subsim_env(name).items())
                     log(f"cosim: waiting up to {external_wait:g} s for external subsim {name!r}; start it with:\n"
-                        f"  {' '.join(['python', *cmd[1:]])}\n"
+                        f"  {env} {' '.join(['python', *cmd[1:]])}\n"
+                        f"  (the two variables are this run's secrets: hand them over privately)\n"
                         f"  (from another machine: run cosim with --listen tcp/0.0.0.0:<port> and use this "
                         f"machine's address)")
                     handles[name] = bus.attach(name, timeout=timeout, wait=external_wait)
@@ -141,12 +150,13 @@ def run_scenario(
     progress: bool = True,
     log: Log = _stderr,
     on_interval: Callable[[Interval], None] | None = None,
+    security: Security | None = None,
 ) -> RunReport:
     method = method or scenario.default_method
     settings = scenario.settings_for(method)
     stop = scenario.stop if stop is None else stop
     output = output or default_output(scenario, method)
-    session = open_session(scenario, inprocess=inprocess, listen=listen, log=log)
+    session = open_session(scenario, inprocess=inprocess, listen=listen, log=log, security=security)
     try:
         coordinator = Coordinator(session.handles, session.plans[method], settings)
         writer = ResultWriter(output, output_signals(scenario, session.descriptions))

@@ -22,6 +22,7 @@ from cosim.coupler.order import check_order
 from cosim.coupler.relaxation import METHODS, Settings
 from cosim.importing import load_model
 from cosim.protocol.keys import check_name
+from cosim.protocol.security import Security
 from cosim.subsim import Subsim
 
 
@@ -81,13 +82,21 @@ KEYS: dict[str, dict[str, Key]] = {
                     "result file, .csv or .npz; relative to the working directory"),
         "signals": Key("list of strings", "every output", "", "'subsim.port' outputs to write"),
     },
+    "security": {
+        "tls_cert": Key("string", "none", "", "router certificate (PEM); with tls_key the router listens on tls/"),
+        "tls_key": Key("string", "none", "", "private key of tls_cert (PEM)"),
+        "tls_ca": Key("string", "none", "", "CA certificate launched subsims verify the router with (PEM)"),
+        "mutual": Key("boolean", "false", "", "true: subsims must present certificates signed by tls_ca"),
+        "auth_file": Key("string", "none", "", "'user:password' lines that may log in besides the run's own login"),
+        "admin_space": Key("boolean", "false", "", "open Zenoh's admin space of the router"),
+    },
     "unified": {
         "function": Key("string", "none", "", "'package.module:function' of the one-integrator reference (RK-U)"),
         "params": Key("table", "{}", "", "keyword arguments of that function"),
     },
 }
 KEYS["coupling.<method>"] = {k: v for k, v in KEYS["coupling"].items() if k != "method"}
-TABLES = {"coupling", "subsims", "couplings", "tolerances", "output", "unified"}
+TABLES = {"coupling", "subsims", "couplings", "tolerances", "output", "unified", "security"}
 
 
 class ScenarioError(ValueError):
@@ -125,6 +134,7 @@ class Scenario:
     output_path: Path | None
     output_signals: tuple[str, ...] | None
     unified: UnifiedSpec | None = None
+    security: Security | None = None  # [security]; paths relative to the scenario file
     raw: Mapping[str, Any] = field(default_factory=dict)  # the file's tables, for variants: parse({**raw, ...})
 
     def settings_for(self, method: str | None = None) -> Settings:
@@ -159,7 +169,8 @@ def parse(raw: Mapping[str, Any], path: Path) -> Scenario:
     out_path, signals = p.output(p.table(raw, "output"))
     return Scenario(path, str(raw.get("name", path.stem)), str(raw.get("description", "")), start, stop,
                     MappingProxyType(subsims), couplings, MappingProxyType(settings), default_method, out_path,
-                    signals, p.unified(p.table(raw, "unified")), MappingProxyType(dict(raw)))
+                    signals, p.unified(p.table(raw, "unified")), p.security(p.table(raw, "security")),
+                    MappingProxyType(dict(raw)))
 
 
 def with_method(s: Scenario, method: str) -> Scenario:
@@ -307,3 +318,23 @@ class _Parser:
             raise self.fail("unified.function", f"must be 'package.module:function', got {function!r}")
         params = self.table(table, "params", "unified.params")
         return UnifiedSpec(function, MappingProxyType(dict(params)))
+
+    def security(self, table: Mapping[str, Any]) -> Security | None:
+        self.known(table, set(KEYS["security"]), "security")
+        if not table:
+            return None
+        files = {}
+        for key in ("tls_cert", "tls_key", "tls_ca", "auth_file"):
+            if key in table:
+                if not isinstance(table[key], str):
+                    raise self.fail(f"security.{key}", "must be a file path string")
+                files[key] = (self.path.parent / table[key]).resolve()
+        flags = {}
+        for key in ("mutual", "admin_space"):
+            if not isinstance(table.get(key, False), bool):
+                raise self.fail(f"security.{key}", "must be true or false")
+            flags[key] = table.get(key, False)
+        try:
+            return Security(**files, **flags).check()
+        except ValueError as exc:
+            raise self.fail("security", str(exc)) from None
