@@ -37,11 +37,15 @@ def subsim_command(
     model: str | None = None,
     python: str = sys.executable,
     tls_ca: Path | None = None,
+    tls_client: tuple[Path, Path] | None = None,
 ) -> list[str]:
     """``python -m module`` for a subsim package, or ``python -m cosim.serve model`` for any class. Its
-    key and login go in the environment (:meth:`Bus.subsim_env`), never here: ``ps`` shows arguments."""
+    key and login go in the environment (:meth:`Bus.subsim_env`), never here: ``ps`` shows arguments.
+    ``tls_ca``: the CA to verify the router with; ``tls_client``: (certificate, key) for mutual TLS."""
     head = [python, "-m", "cosim.serve", model] if model else [python, "-m", module]
     tls = ["--tls-ca", str(tls_ca)] if tls_ca is not None else []
+    if tls_client is not None:
+        tls += ["--tls-cert", str(tls_client[0]), "--tls-key", str(tls_client[1])]
     return [*head, "--connect", endpoint, "--run", run, "--name", name, *tls]
 
 
@@ -110,7 +114,10 @@ class Bus:
         return {SECRET_ENV: self.key(name).hex(), ZENOH_AUTH_ENV: f"{user}:{password}"}
 
     def command(self, module: str, name: str, model: str | None = None) -> list[str]:
-        return subsim_command(module, self.endpoint, self.run, name, model, tls_ca=self.security.tls_ca)
+        """The command line of a subsim of this run (under mutual TLS, local ones show the router's certificate)."""
+        sec = self.security
+        client = (sec.tls_cert, sec.tls_key) if sec.mutual and sec.tls_cert and sec.tls_key else None
+        return subsim_command(module, self.endpoint, self.run, name, model, tls_ca=sec.tls_ca, tls_client=client)
 
     def attach(self, name: str, timeout: float = 60.0, wait: float = 10.0) -> RemoteHandle:
         """Handle to a subsim that is (or soon will be) serving ``name`` in this run."""

@@ -65,6 +65,7 @@ def client_config(
     if security is not None and security.tls_ca is not None:
         extra["transport/link/tls/root_ca_certificate"] = str(security.tls_ca)
     if security is not None and security.tls_cert is not None:
+        extra["transport/link/tls/enable_mtls"] = True
         extra["transport/link/tls/connect_certificate"] = str(security.tls_cert)
         extra["transport/link/tls/connect_private_key"] = str(security.tls_key)
     return make_config("client", connect=[endpoint], extra=extra)
