@@ -219,6 +219,32 @@ def flood(model: str, params: dict, count: int, window: int, seed: int) -> dict:
                 "state_changes": changed}
 
 
+def peak_rss_mb(pid: int) -> float:
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmHWM:"):
+            return int(line.split()[1]) / 1024
+    return float("nan")
+
+
+def oversized(megabytes: int = 32) -> str:
+    """One run_interval of ``megabytes`` MB to an integrator: how fast it is refused, and the peak memory."""
+    with Bus.open() as bus:
+        proc = bus.spawn("subsims.integrator", "big", quiet=True, timeout=600.0)
+        proc.handle.configure({})
+        before = peak_rss_mb(proc.popen.pid)
+        n = megabytes * 2**20 // 16
+        times, inputs = np.linspace(0.0, 1.0, n), {"u": np.zeros((n, 1))}
+        t0 = time.perf_counter()
+        try:
+            proc.handle.run_interval(times, inputs)
+            outcome = "ANSWERED (no cap)"
+        except Exception as exc:
+            outcome = f"refused ({getattr(exc, 'code', type(exc).__name__)})"
+        wall = time.perf_counter() - t0
+        return (f"a {megabytes} MB run_interval to the integrator: {outcome} after {wall:.2f} s; subsim peak RSS "
+                f"{before:.0f} MB before, {peak_rss_mb(proc.popen.pid):.0f} MB after")
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--count", type=int, default=100_000, help="requests per subsim")
@@ -226,7 +252,11 @@ def main() -> int:
     p.add_argument("--only", nargs="*", help="subsims whose model contains one of these strings")
     p.add_argument("--seed", type=int, default=2026)
     p.add_argument("--json", action="store_true", help="one JSON line per subsim")
+    p.add_argument("--oversized", type=int, default=32, metavar="MB",
+                   help="first send one request this large and report (0: skip)")
     args = p.parse_args()
+    if args.oversized and not args.json:
+        print(oversized(args.oversized), flush=True)
     models = {m: prm for m, prm in shipped().items() if not args.only or any(s in m for s in args.only)}
     bad = 0
     for model, params in models.items():

@@ -164,3 +164,24 @@ def test_a_wildcard_query_is_ignored_even_when_sealed_with_the_right_key(served:
     for key in ("cosim/**", f"cosim/{served.run}/**", f"cosim/{served.run}/*/rpc"):
         assert list(served.session.get(key, payload=frame, timeout=5.0)) == []
     assert served.attach("victim").status()["name"] == "victim"
+
+
+def test_the_gate_accepts_each_sequence_number_once_within_the_window() -> None:
+    from cosim.protocol.service import REPLAY_WINDOW, Gate
+    from cosim.runtime import Runtime
+    from subsims.integrator.subsim import Integrator
+
+    key = bytes(range(32))
+    gate = Gate(Runtime(Integrator), key)
+
+    def answered(seq: int) -> bool:
+        admitted, _ = gate.admit(seal_request(key, seq, encode_request("status")))
+        return admitted is not None and gate.answer(admitted) is not None
+
+    base = 10**15
+    assert answered(base + 10) and answered(base + 12)
+    assert answered(base + 11)  # out of order, within the window: once
+    assert not answered(base + 11) and not answered(base + 12) and not answered(base + 10)  # replays
+    assert not answered(base + 12 - REPLAY_WINDOW)  # too far below the highest accepted
+    assert gate.admit(seal_request(bytes(32), base + 99, encode_request("status"))) == (None, None)  # wrong key
+    assert gate.counts["replayed"] == 4 and gate.counts["dropped"] == 1

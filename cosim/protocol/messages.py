@@ -12,8 +12,9 @@ Over a bus every request and reply is *sealed* with the subsim's key (section 4.
     request frame:  body || seq (8 bytes, big-endian) || HMAC-SHA256(key, "cosim-request" 0 seq body)
     reply frame:    body || HMAC-SHA256(key, "cosim-reply" 0 seq body)
 
-``seq`` must grow from request to request: a subsim refuses a sequence number it has seen or passed,
-so a recorded request cannot be replayed, and the reply tag binds each reply to its request.
+A subsim accepts each ``seq`` once, and none more than a small window below the highest it accepted
+(``cosim.protocol.service.REPLAY_WINDOW``), so a recorded request cannot be replayed; the reply tag
+binds each reply to its request.
 """
 
 from __future__ import annotations

@@ -32,6 +32,9 @@ log = logging.getLogger(__name__)
 MAX_SAMPLES = 10_000
 CAP_FACTOR = 4
 CAP_FLOOR = 1 << 20
+# Sequence numbers accepted out of order, below the highest accepted (several coordinator threads may
+# send to one subsim); each number is still accepted only once.
+REPLAY_WINDOW = 1024
 
 
 def answer(runtime: Runtime, payload: bytes | memoryview) -> bytes:
@@ -69,15 +72,17 @@ class Gate:
 
     :meth:`admit` runs where the transport receives, must never block and decodes nothing: a frame over
     the cap gets a ``too_large`` reply, a frame without this subsim's tag is dropped without a word.
-    :meth:`answer` runs on the serving thread, in arrival order: a sequence number not above every one
-    accepted before (a replay) is dropped; anything else is decoded and answered. ``key=None`` turns
+    :meth:`answer` runs on the serving thread, in arrival order: a sequence number accepted before, or
+    more than ``REPLAY_WINDOW`` below the highest accepted, is a replay and is dropped; anything else
+    is decoded and answered. ``key=None`` turns
     sealing off (frames are bare request bodies), for transports that authenticate otherwise.
     ``counts`` tallies what happened (admitted, dropped, replayed, too_large, busy).
     """
 
     def __init__(self, runtime: Runtime, key: bytes | None, max_request: int | None = None) -> None:
         self.runtime, self.key, self.max_request = runtime, key, max_request
-        self.last_seq = -1
+        self.last_seq = -1  # the highest sequence number accepted
+        self._recent: set[int] = set()  # those accepted within the window below it
         self.counts: Counter[str] = Counter()
 
     @property
@@ -101,12 +106,23 @@ class Gate:
 
     def answer(self, request: Admitted) -> bytes | None:
         """The sealed reply, or ``None`` for a replayed request (dropped)."""
-        if self.key is not None:
-            if request.seq <= self.last_seq:
-                self.counts["replayed"] += 1
-                return None
-            self.last_seq = request.seq
+        if self.key is not None and not self._fresh(request.seq):
+            self.counts["replayed"] += 1
+            return None
         return self._seal(request.seq, answer(self.runtime, request.body))
+
+    def _fresh(self, seq: int) -> bool:
+        """Accept ``seq`` once, and only within the window below the highest accepted."""
+        if seq > self.last_seq:
+            self.last_seq = seq
+            self._recent.add(seq)
+            if len(self._recent) > 2 * REPLAY_WINDOW:
+                self._recent = {s for s in self._recent if s > seq - REPLAY_WINDOW}
+            return True
+        if seq <= self.last_seq - REPLAY_WINDOW or seq in self._recent:
+            return False
+        self._recent.add(seq)
+        return True
 
     def busy(self, request: Admitted, queued: int) -> bytes:
         self.counts["busy"] += 1
