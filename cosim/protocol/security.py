@@ -88,8 +88,9 @@ class Security:
     listens on ``tls/`` endpoints. ``tls_ca``: the CA that signed it, handed to launched subsims, and
     with ``mutual`` also the CA that client certificates must chain to. ``auth_file``: ``user:password``
     lines that may log in besides the run's own generated login. ``admin_space``: open Zenoh's admin
-    space (closed by default) to the coordinator's own session; access control still keeps clients out. Whatever is set, the router always requires a login and applies access
-    control to the run's keys, and every request carries its subsim's tag.
+    space (closed by default) to the coordinator's own session; access control still keeps clients
+    out. Whatever is set, the router always requires a login and applies access control to the run's
+    keys, and every request carries its subsim's tag.
     """
 
     tls_cert: Path | None = None
