@@ -80,7 +80,7 @@ def open_session(
         try:
             bus = Bus.open(listen, security=security or scenario.security)
         except ValueError as exc:
-            raise ScenarioError(f"{scenario.path}: [security] {exc}") from None
+            raise ScenarioError(f"cannot open the bus: {exc}") from None
     session = Session(scenario, handles, {}, bus)
     try:
         if bus is not None:

@@ -109,7 +109,8 @@ def open_router(
     :func:`access_control` for ``run``. ``security`` adds TLS (``tls/`` endpoints) and opens the admin
     space when asked. Port 0 is replaced by a free port picked here (the admin space stays closed)."""
     security = security or Security()
-    proto, host, port = _split_endpoint(listen)
+    proto = listen.partition("/")[0]
+    host, port = _split_endpoint(listen) if proto in ("tcp", "tls") else ("", -1)  # e.g. unixsock-stream/...
     if security.tls and proto != "tls":
         raise ValueError(f"--listen {listen}: with a TLS certificate the endpoint must be tls/<host>:<port>")
     if proto == "tls" and not security.tls:
@@ -133,22 +134,21 @@ def open_router(
         tries = 5 if port == 0 else 1
         for attempt in range(tries):
             chosen = _free_port(host) if port == 0 else port
-            endpoint = f"{proto}/{host}:{chosen}"
+            endpoint = f"{proto}/{host}:{chosen}" if port >= 0 else listen
             try:  # the dictionary is read here; the directory goes when the router is open
                 session = zenoh.open(make_config("router", listen=[endpoint], extra=extra))
                 break
             except zenoh.ZError as exc:
                 if attempt == tries - 1:
                     raise RuntimeError(f"cannot listen on {endpoint}: {exc}"[:300]) from None
-    return session, _connectable(proto, host, chosen)
+    return session, _connectable(proto, host, chosen) if port >= 0 else listen
 
 
-def _split_endpoint(endpoint: str) -> tuple[str, str, int]:
-    proto, sep, rest = endpoint.partition("/")
-    host, colon, port = rest.rpartition(":")
-    if not sep or not colon or not port.isdigit() or proto not in ("tcp", "tls"):
+def _split_endpoint(endpoint: str) -> tuple[str, int]:
+    host, colon, port = endpoint.partition("/")[2].rpartition(":")
+    if not colon or not host or not port.isdigit():
         raise ValueError(f"endpoint {endpoint!r}: expected tcp/<host>:<port> or tls/<host>:<port>")
-    return proto, host, int(port)
+    return host, int(port)
 
 
 def _free_port(host: str) -> int:
