@@ -79,7 +79,7 @@ def open_session(
     else:
         try:
             bus = Bus.open(listen, security=security or scenario.security)
-        except ValueError as exc:
+        except (ValueError, RuntimeError) as exc:  # bad --listen or security files; port taken
             raise ScenarioError(f"cannot open the bus: {exc}") from None
     session = Session(scenario, handles, {}, bus)
     try:
