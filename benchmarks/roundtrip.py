@@ -38,6 +38,7 @@ from cosim.handles import InProcessHandle
 from cosim.launch import Bus
 from cosim.protocol.keys import coordinator_alive_key
 from cosim.protocol.messages import decode_reply, decode_request, encode_request, encode_result
+from cosim.protocol.security import ClientSecurity
 from cosim.protocol.service import answer
 from cosim.protocol.transport.session import client_config
 from cosim.runtime import Runtime
@@ -67,7 +68,8 @@ def serve_bare(endpoint: str, run: str, reply_size: int) -> int:
 
     signal.signal(signal.SIGTERM, stop)
     reply = bytes(range(256)) * (reply_size // 256) + bytes(reply_size % 256)
-    with zenoh.open(client_config(endpoint, 10.0)) as session:
+    security = ClientSecurity.from_env()  # the run's login (the bare responder seals nothing)
+    with zenoh.open(client_config(endpoint, 10.0, security=security)) as session:
         queryable = session.declare_queryable(bare_key(run), zenoh.handlers.FifoChannel(64))
         # exit with the coordinator, as real subsims do
         watch = session.liveliness().declare_subscriber(
@@ -97,22 +99,22 @@ def serve_timed(endpoint: str, run: str, name: str) -> int:
     """
     import json
 
-    import cosim.protocol.transport.server as server
+    import cosim.protocol.service as service
     from cosim.process import main as serve_model
 
-    untimed = server.answer
+    untimed = service.answer
     wall: list[float] = []
     cpu: list[float] = []
 
     def timed(runtime: Runtime, payload: bytes) -> bytes:
         w0, c0 = time.perf_counter_ns(), time.thread_time_ns()
         reply = untimed(runtime, payload)
-        if payload[:40].find(b"run_interval") >= 0:
+        if bytes(payload[:40]).find(b"run_interval") >= 0:
             wall.append((time.perf_counter_ns() - w0) / 1e3)
             cpu.append((time.thread_time_ns() - c0) / 1e3)
         return reply
 
-    server.answer = timed  # CommandServer.serve looks the name up at each request
+    service.answer = timed  # Gate.answer looks the name up at each request
     rc = serve_model(Integrator, ["--connect", endpoint, "--run", run, "--name", name])
     print(json.dumps({"n": len(wall), "wall": wall, "cpu": cpu}), flush=True)
     return rc
@@ -125,6 +127,7 @@ def in_situ(bus: Bus, warmup: int, count: int) -> tuple[list[float], list[float]
     name = "integ-timed"
     popen = subprocess.Popen(
         [sys.executable, str(Path(__file__).resolve()), "--timed-subsim", bus.endpoint, bus.run, name],
+        env={**os.environ, **bus.subsim_env(name)},
         stdout=subprocess.PIPE,
         stderr=subprocess.DEVNULL,
         text=True,
@@ -152,7 +155,8 @@ class BareClient:
     def __init__(self, bus: Bus, reply_size: int) -> None:
         self.session, self.key = bus.session, bare_key(bus.run)
         self.popen = subprocess.Popen(
-            [sys.executable, str(Path(__file__).resolve()), "--bare-server", bus.endpoint, bus.run, str(reply_size)]
+            [sys.executable, str(Path(__file__).resolve()), "--bare-server", bus.endpoint, bus.run, str(reply_size)],
+            env={**os.environ, **bus.subsim_env("bare")},
         )
         deadline = time.monotonic() + 20.0
         while not self._answers(b"ping"):  # declarations propagate asynchronously

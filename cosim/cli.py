@@ -15,6 +15,7 @@ from cosim.contract import SubsimError
 from cosim.coupler.relaxation import METHODS, Interval, NotConverged
 from cosim.outputs import OutputError, OutputWriteError
 from cosim.preflight import UsageError, check_listen, check_stop, zenoh_error_line
+from cosim.protocol.security import Security
 from cosim.runner import default_output, open_session, run_scenario
 from cosim.scenario import ScenarioError, load
 
@@ -66,7 +67,8 @@ def _run_until_done(args: argparse.Namespace, state: dict) -> int:
             check_listen(args.listen)
         report = run_scenario(scenario, method=method, stop=args.stop, output=output, inprocess=args.inprocess,
                               listen=args.listen, progress=not args.quiet, on_interval=committed,
-                              overwrite=args.overwrite, restarts=args.restarts, timeout=args.timeout)
+                              overwrite=args.overwrite, restarts=args.restarts, timeout=args.timeout,
+                              security=_security(args, scenario.security))
     s = report.summary
     hist = ", ".join(f"{k} stages: {v}" for k, v in sorted(s.stages.items()))
     print(f"{scenario.name} ({report.method}): {s.intervals} intervals to t = {s.t_end:.6g} in {s.wall_time:.2f} s"
@@ -89,6 +91,17 @@ def _recover(args: argparse.Namespace) -> int:
 
     print(recover(args.path))
     return 0
+
+
+def _security(args: argparse.Namespace, default: Security | None) -> Security | None:
+    """--tls-*/--auth-file/--mutual-tls replace the scenario's [security] table when any is given."""
+    given = {k: getattr(args, k) for k in ("tls_cert", "tls_key", "tls_ca", "auth_file") if getattr(args, k)}
+    if not given and not args.mutual_tls:
+        return default
+    try:
+        return Security(**given, mutual=args.mutual_tls).check()
+    except ValueError as exc:
+        raise ScenarioError(str(exc)) from None
 
 
 def _ports(ports: dict) -> str:
@@ -165,6 +178,12 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--timeout", type=float, metavar="SECONDS",
                    help="wait this long for a reply before a subsim counts as hung (default: derived from the "
                         "measured request times, at least 1.5 s)")
+    r.add_argument("--tls-cert", type=Path, help="router certificate (PEM); listen on tls/<host>:<port> (see "
+                   "docs/reliability.md)")
+    r.add_argument("--tls-key", type=Path, help="private key of --tls-cert (PEM)")
+    r.add_argument("--tls-ca", type=Path, help="CA certificate that signed --tls-cert (given to launched subsims)")
+    r.add_argument("--mutual-tls", action="store_true", help="subsims must present certificates signed by --tls-ca")
+    r.add_argument("--auth-file", type=Path, help="'user:password' lines that may log in to the router")
     r.set_defaults(fn=_run)
 
     d = sub.add_parser("describe", help="print subsims, couplings, execution order and feedback edges")

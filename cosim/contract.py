@@ -25,8 +25,11 @@ ERROR_CODES: dict[str, str] = {
     "not_in_history": "rollback target time is not in the committed history",
     "model_error": "the model could not advance (e.g. a singularity); nothing committed changed",
     "internal": "unexpected failure inside the subsim; nothing committed changed",
+    "too_large": "the request is larger than the subsim's request cap; refused before decoding",
+    "busy": "the subsim's request queue is full; the request was refused, nothing changed; retry later",
     "timeout": "no reply within the caller's timeout (raised coordinator-side)",
     "no_responder": "nobody serves this subsim's key, or the process died mid-request (coordinator-side)",
+    "unauthenticated": "no reply carried this subsim's tag for the request (coordinator-side)",
 }
 
 

@@ -10,22 +10,45 @@ import subprocess
 import sys
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import zenoh
 
 from cosim.contract import SubsimError
 from cosim.protocol.keys import coordinator_alive_key, new_run_id
+from cosim.protocol.security import (
+    SECRET_ENV,
+    ZENOH_AUTH_ENV,
+    Security,
+    new_master_secret,
+    read_dictionary,
+    subsim_key,
+    zenoh_login,
+)
 from cosim.protocol.transport.client import RemoteHandle
 from cosim.protocol.transport.session import open_router
 
 
 def subsim_command(
-    module: str, endpoint: str, run: str, name: str, model: str | None = None, python: str = sys.executable,
+    module: str,
+    endpoint: str,
+    run: str,
+    name: str,
+    model: str | None = None,
+    python: str = sys.executable,
+    tls_ca: Path | None = None,
+    tls_client: tuple[Path, Path] | None = None,
     lease: float | None = None,
 ) -> list[str]:
-    """``python -m module`` for a subsim package, or ``python -m cosim.serve model`` for any class."""
+    """``python -m module`` for a subsim package, or ``python -m cosim.serve model`` for any class. Its
+    key and login go in the environment (:meth:`Bus.subsim_env`), never here: ``ps`` shows arguments.
+    ``tls_ca``: the CA to verify the router with; ``tls_client``: (certificate, key) for mutual TLS."""
     head = [python, "-m", "cosim.serve", model] if model else [python, "-m", module]
-    return [*head, "--connect", endpoint, "--run", run, "--name", name, *(["--lease", f"{lease:g}"] if lease else [])]
+    tls = ["--tls-ca", str(tls_ca)] if tls_ca is not None else []
+    if tls_client is not None:
+        tls += ["--tls-cert", str(tls_client[0]), "--tls-key", str(tls_client[1])]
+    lease_arg = ["--lease", f"{lease:g}"] if lease else []
+    return [*head, "--connect", endpoint, "--run", run, "--name", name, *tls, *lease_arg]
 
 
 @dataclass
@@ -62,23 +85,49 @@ class SubsimProcess:
 
 @dataclass
 class Bus:
-    """The coordinator's router session, its endpoint and the run id that namespaces every key."""
+    """The coordinator's router session, its endpoint and the run id that namespaces every key.
+
+    Every run has an unguessable id and a master secret; each subsim signs with a key derived from it
+    (:meth:`key`), and the router admits only the run's own login (plus the users of
+    ``security.auth_file``) under access control (docs/reliability.md, "Security model")."""
 
     session: zenoh.Session
     endpoint: str
     run: str
+    secret: bytes = field(default_factory=new_master_secret, repr=False)
+    security: Security = field(default_factory=Security)
     processes: list[SubsimProcess] = field(default_factory=list)
 
     @classmethod
-    def open(cls, listen: str = "tcp/127.0.0.1:0", run: str | None = None) -> Bus:
-        session, endpoint = open_router(listen)
-        bus = cls(session, endpoint, run or new_run_id())
+    def open(cls, listen: str = "tcp/127.0.0.1:0", run: str | None = None, security: Security | None = None) -> Bus:
+        security = (security or Security()).check()
+        run, secret = run or new_run_id(), new_master_secret()
+        user, password = zenoh_login(secret, run)
+        logins = {**(read_dictionary(security.auth_file) if security.auth_file else {}), user: password}
+        session, endpoint = open_router(listen, run=run, logins=logins, security=security)
+        bus = cls(session, endpoint, run, secret, security)
         bus._token = session.liveliness().declare_token(coordinator_alive_key(bus.run))
         return bus
 
+    def key(self, name: str) -> bytes:
+        """The key subsim ``name`` signs with (only that subsim gets it)."""
+        return subsim_key(self.secret, self.run, name)
+
+    def subsim_env(self, name: str) -> dict[str, str]:
+        """What a subsim process of this run needs in its environment: its key and the run's login."""
+        user, password = zenoh_login(self.secret, self.run)
+        return {SECRET_ENV: self.key(name).hex(), ZENOH_AUTH_ENV: f"{user}:{password}"}
+
+    def command(self, module: str, name: str, model: str | None = None, lease: float | None = None) -> list[str]:
+        """The command line of a subsim of this run (under mutual TLS, local ones show the router's certificate)."""
+        sec = self.security
+        client = (sec.tls_cert, sec.tls_key) if sec.mutual and sec.tls_cert and sec.tls_key else None
+        return subsim_command(module, self.endpoint, self.run, name, model, tls_ca=sec.tls_ca, tls_client=client,
+                              lease=lease)
+
     def attach(self, name: str, timeout: float = 60.0, wait: float = 10.0) -> RemoteHandle:
         """Handle to a subsim that is (or soon will be) serving ``name`` in this run."""
-        handle = RemoteHandle(self.session, self.run, name, timeout=timeout)
+        handle = RemoteHandle(self.session, self.run, name, timeout=timeout, key=self.key(name))
         try:
             handle.wait_ready(wait)
         except Exception:
@@ -97,10 +146,10 @@ class Bus:
         lease: float | None = None,
     ) -> SubsimProcess:
         """Start ``python -m module`` (or ``cosim.serve model``) as subsim ``name``; wait until it answers."""
-        env = dict(os.environ)
+        env = {**os.environ, **self.subsim_env(name)}
         env.setdefault("PYTHONUNBUFFERED", "1")
         popen = subprocess.Popen(
-            subsim_command(module, self.endpoint, self.run, name, model, lease=lease),
+            self.command(module, name, model, lease=lease),
             env=env,
             stdout=subprocess.DEVNULL if quiet else None,
             stderr=subprocess.DEVNULL if quiet else None,
@@ -108,7 +157,7 @@ class Bus:
             # subsims in order (they would otherwise each print their own stop line)
             process_group=0,
         )
-        handle = RemoteHandle(self.session, self.run, name, timeout=timeout)
+        handle = RemoteHandle(self.session, self.run, name, timeout=timeout, key=self.key(name))
         proc = SubsimProcess(name, popen, handle, module, model, lease)
         self.processes.append(proc)
         try:

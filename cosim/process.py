@@ -1,5 +1,9 @@
 """Run a subsim model as its own process: ``python -m subsims.<name> --connect EP --run RUN``.
 
+The environment must hold the subsim's key (``COSIM_SECRET``) and, for a router that asks for a login,
+``COSIM_ZENOH_AUTH`` (or ``--auth-file``); ``cosim run`` sets both for the subsims it launches and
+prints them for external ones. Secrets never go on the command line, which ``ps`` shows.
+
 Exit codes: 0 after ``shutdown``, SIGTERM, SIGINT or loss of the coordinator (its liveliness
 token is deleted, or its router is unreachable for 2 s); 2 when the
 coordinator cannot be reached in time or the arguments are bad. Every path closes the Zenoh
@@ -15,10 +19,12 @@ import sys
 import threading
 import time
 from collections.abc import Sequence
+from pathlib import Path
 
 import zenoh
 
 from cosim.protocol.keys import check_name
+from cosim.protocol.security import SECRET_ENV, ZENOH_AUTH_ENV, ClientSecurity
 from cosim.protocol.transport.server import CommandServer
 from cosim.protocol.transport.session import client_config
 from cosim.runtime import DEFAULT_HISTORY, Runtime
@@ -45,12 +51,26 @@ def parse_args(model_cls: type[Subsim] | Subsim, argv: Sequence[str] | None) -> 
     p.add_argument("--connect-timeout", type=float, default=10.0, help="seconds to wait for the coordinator")
     p.add_argument("--history", type=int, default=DEFAULT_HISTORY, help="committed states kept for rollback")
     p.add_argument("--lease", type=float, default=10.0, help="seconds a silent link to the coordinator lives")
+    p.add_argument("--max-request", type=int, metavar="BYTES",
+                   help="refuse larger requests before decoding them (default: sized from the input ports)")
+    p.add_argument("--queue", type=int, default=64, metavar="N", help="requests waiting beyond N get a 'busy' reply")
+    p.add_argument("--auth-file", type=Path, help=f"file with one 'user:password' line (else ${ZENOH_AUTH_ENV})")
+    p.add_argument("--tls-ca", type=Path, help="CA certificate (PEM) that signed the coordinator's TLS certificate")
+    p.add_argument("--tls-cert", type=Path, help="this subsim's certificate, for mutual TLS")
+    p.add_argument("--tls-key", type=Path, help="this subsim's private key, for mutual TLS")
     args = p.parse_args(argv)
     try:
         check_name(args.run, "--run")
         check_name(args.name, "--name")
+        args.security = ClientSecurity.from_env(None, args.auth_file, args.tls_ca, args.tls_cert, args.tls_key)
+        for name in (SECRET_ENV, ZENOH_AUTH_ENV):  # read once; processes this one starts do not inherit them
+            os.environ.pop(name, None)
     except ValueError as exc:
         p.error(str(exc))
+    if args.max_request is not None and args.max_request < 1:
+        p.error("--max-request must be a positive number of bytes")
+    if args.queue < 1:
+        p.error("--queue must be at least 1")
     return args
 
 
@@ -79,16 +99,19 @@ def main(model_cls: type[Subsim] | Subsim, argv: Sequence[str] | None = None) ->
     signal.signal(signal.SIGTERM, _raise_stop)
     signal.signal(signal.SIGINT, _raise_stop)
     try:
-        session = zenoh.open(client_config(args.connect, args.connect_timeout, int(args.lease * 1000)))
+        session = zenoh.open(client_config(args.connect, args.connect_timeout, int(args.lease * 1000),
+                                          security=args.security))
     except (zenoh.ZError, _Stop) as exc:
         print(
-            f"{args.name}: cannot reach the coordinator at {args.connect} within {args.connect_timeout:g} s ({exc})",
+            f"{args.name}: cannot reach the coordinator at {args.connect} within {args.connect_timeout:g} s "
+            f"(or its login/TLS refused ours: check ${ZENOH_AUTH_ENV}/--auth-file and --tls-ca) ({exc})",
             file=sys.stderr,
         )
         return 2
     try:
         server = CommandServer(
-            session, args.run, runtime, on_coordinator_lost=lambda: os.kill(os.getpid(), signal.SIGTERM)
+            session, args.run, runtime, on_coordinator_lost=lambda: os.kill(os.getpid(), signal.SIGTERM),
+            key=args.security.key, max_request=args.max_request, queue_size=args.queue,
         )
         threading.Thread(target=_watch_router, args=(session,), daemon=True, name="router-watch").start()
         print(f"{args.name}: serving run {args.run} via {args.connect} (pid {os.getpid()})", file=sys.stderr)

@@ -17,9 +17,10 @@ from cosim.coupler.plan import Plan
 from cosim.coupler.relaxation import Interval, RunSummary
 from cosim.driver import Coordinator, Deadline, Recovery, plan_for
 from cosim.handles import Description, InProcessHandle, SubsimHandle
-from cosim.launch import Bus, subsim_command
+from cosim.launch import Bus
 from cosim.outputs import reserve_output
 from cosim.progress import Progress
+from cosim.protocol.security import Security
 from cosim.results import ResultWriter, diag_path, output_units
 from cosim.scenario import Scenario, ScenarioError
 
@@ -80,8 +81,11 @@ def open_session(
     external_wait: float = 300.0,
     log: Log = _stderr,
     timeout: float = 120.0,
+    security: Security | None = None,
 ) -> Session:
-    """Launch (or attach to) and configure every subsim. The caller must ``close()`` the session."""
+    """Launch (or attach to) and configure every subsim. The caller must ``close()`` the session.
+
+    ``security``: TLS and login files (else the scenario's ``[security]`` table, else loopback defaults)."""
     handles: dict[str, SubsimHandle] = {}
     bus = None
     if inprocess:
@@ -90,15 +94,20 @@ def open_session(
                 raise ScenarioError(f"{scenario.path}: [subsims.{name}] is external: cannot run it --inprocess")
             handles[name] = InProcessHandle(spec.model_class()(), name)
     else:
-        bus = Bus.open(listen)
+        try:
+            bus = Bus.open(listen, security=security or scenario.security)
+        except (ValueError, RuntimeError) as exc:  # bad --listen or security files; port taken
+            raise ScenarioError(f"cannot open the bus: {exc}") from None
     session = Session(scenario, handles, {}, bus, external_wait=external_wait, timeout=timeout)
     try:
         if bus is not None:
             for name, spec in scenario.subsims.items():
                 if spec.external:
-                    cmd = subsim_command("<your.subsim.module>", bus.endpoint, bus.run, name, spec.model)
+                    cmd = bus.command("<your.subsim.module>", name, spec.model)
+                    env = " ".join(f"{k}={v}" for k, v in bus.subsim_env(name).items())
                     log(f"cosim: waiting up to {external_wait:g} s for external subsim {name!r}; start it with:\n"
-                        f"  {' '.join(['python', *cmd[1:]])}\n"
+                        f"  {env} {' '.join(['python', *cmd[1:]])}\n"
+                        f"  (the two variables are this run's secrets: hand them over privately)\n"
                         f"  (from another machine: run cosim with --listen tcp/0.0.0.0:<port> and use this "
                         f"machine's address)")
                     handles[name] = bus.attach(name, timeout=timeout, wait=external_wait)
@@ -162,6 +171,7 @@ def run_scenario(
     overwrite: bool = True,
     restarts: int | None = None,
     timeout: float | None = None,
+    security: Security | None = None,
 ) -> RunReport:
     """Run ``scenario``. ``overwrite=False`` refuses an existing result (OutputError) before anything is
     launched; ``restarts`` and ``timeout`` override its [run] table (see ``cosim.scenario.KEYS``)."""
@@ -171,7 +181,7 @@ def run_scenario(
     output = output or default_output(scenario, method)
     lock = reserve_output(output, overwrite)  # locked and checked before anything is launched
     try:
-        session = open_session(scenario, inprocess=inprocess, listen=listen, log=log)
+        session = open_session(scenario, inprocess=inprocess, listen=listen, log=log, security=security)
     except BaseException:
         lock.release()
         raise

@@ -23,6 +23,7 @@ from cosim.coupler.order import check_order
 from cosim.coupler.relaxation import METHODS, Settings
 from cosim.importing import load_model
 from cosim.protocol.keys import check_name
+from cosim.protocol.security import Security
 from cosim.subsim import Subsim
 
 
@@ -86,10 +87,18 @@ KEYS: dict[str, dict[str, Key]] = {
     },
     "run": {
         "restarts": Key("integer", "2", "", "replacements of subsims that die or hang before the run fails (0: fail)"),
-        "timeout": Key("number", "auto", "s", "wait for a reply before a subsim counts as hung; auto: 100 times the "
-                       "slowest recent request, at least 1.5 s (30 s for the first few)"),
+        "timeout": Key("number", "auto", "s", "wait for a reply before a subsim counts as hung; auto: the largest of "
+                       "1.5 s, 50 times the median and 3 times the slowest recent request (30 s for the first few)"),
         "checkpoint_every": Key("integer", "200", "", "intervals between checkpoints of every subsim's state"),
         "lease": Key("number", "10", "s", "Zenoh link lease of launched subsims: how long a silent link lives"),
+    },
+    "security": {
+        "tls_cert": Key("string", "none", "", "router certificate (PEM); with tls_key the router listens on tls/"),
+        "tls_key": Key("string", "none", "", "private key of tls_cert (PEM)"),
+        "tls_ca": Key("string", "none", "", "CA certificate launched subsims verify the router with (PEM)"),
+        "mutual": Key("boolean", "false", "", "true: subsims must present certificates signed by tls_ca"),
+        "auth_file": Key("string", "none", "", "'user:password' lines that may log in besides the run's own login"),
+        "admin_space": Key("boolean", "false", "", "open Zenoh's admin space of the router"),
     },
     "unified": {
         "function": Key("string", "none", "", "'package.module:function' of the one-integrator reference (RK-U)"),
@@ -97,7 +106,7 @@ KEYS: dict[str, dict[str, Key]] = {
     },
 }
 KEYS["coupling.<method>"] = {k: v for k, v in KEYS["coupling"].items() if k != "method"}
-TABLES = {"coupling", "subsims", "couplings", "tolerances", "output", "unified", "run"}
+TABLES = {"coupling", "subsims", "couplings", "tolerances", "output", "unified", "run", "security"}
 
 
 class ScenarioError(ValueError):
@@ -146,6 +155,7 @@ class Scenario:
     output_signals: tuple[str, ...] | None
     unified: UnifiedSpec | None = None
     run: RunSpec = RunSpec()
+    security: Security | None = None  # [security]; paths relative to the scenario file
     raw: Mapping[str, Any] = field(default_factory=dict)  # the file's tables, for variants: parse({**raw, ...})
 
     def settings_for(self, method: str | None = None) -> Settings:
@@ -191,6 +201,7 @@ def parse(raw: Mapping[str, Any], path: Path) -> Scenario:
     return Scenario(path, str(raw.get("name", path.stem)), str(raw.get("description", "")), start, stop,
                     MappingProxyType(subsims), couplings, MappingProxyType(settings), default_method, out_path,
                     signals, p.unified(p.table(raw, "unified")), p.run(p.table(raw, "run")),
+                    p.security(p.table(raw, "security")),
                     MappingProxyType(dict(raw)))
 
 
@@ -362,3 +373,23 @@ class _Parser:
             raise self.fail("unified.function", f"must be 'package.module:function', got {function!r}")
         params = self.table(table, "params", "unified.params")
         return UnifiedSpec(function, MappingProxyType(dict(params)))
+
+    def security(self, table: Mapping[str, Any]) -> Security | None:
+        self.known(table, set(KEYS["security"]), "security")
+        if not table:
+            return None
+        files = {}
+        for key in ("tls_cert", "tls_key", "tls_ca", "auth_file"):
+            if key in table:
+                if not isinstance(table[key], str):
+                    raise self.fail(f"security.{key}", "must be a file path string")
+                files[key] = (self.path.parent / table[key]).resolve()
+        flags = {}
+        for key in ("mutual", "admin_space"):
+            if not isinstance(table.get(key, False), bool):
+                raise self.fail(f"security.{key}", "must be true or false")
+            flags[key] = table.get(key, False)
+        try:
+            return Security(**files, **flags).check()
+        except ValueError as exc:
+            raise self.fail("security", str(exc)) from None

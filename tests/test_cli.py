@@ -142,13 +142,16 @@ def test_external_subsim_started_by_hand(tmp_path: Path, popen_cleanup: list) ->
     coord = subprocess.Popen([*COSIM, "run", str(sc), "--stop", "0.2", "--output", str(out), "--quiet"],
                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     popen_cleanup.append(coord)
-    command = None
+    command, env = None, {}
     for line in coord.stderr:
-        if line.strip().startswith("python -m cosim.serve"):
-            command = line.split()
+        words = line.split()
+        if "python" in words and words[0].startswith("COSIM_SECRET="):  # VAR=value ... python -m cosim.serve ...
+            at = words.index("python")
+            env, command = dict(w.split("=", 1) for w in words[:at]), words[at:]
             break
     assert command is not None and "--connect" in command and "mass2" in command
-    user = subprocess.Popen([sys.executable, *command[1:]], stderr=subprocess.DEVNULL)
+    assert set(env) == {"COSIM_SECRET", "COSIM_ZENOH_AUTH"}  # the secrets travel in the environment
+    user = subprocess.Popen([sys.executable, *command[1:]], stderr=subprocess.DEVNULL, env={**os.environ, **env})
     popen_cleanup.append(user)
     stdout, _ = coord.communicate(timeout=120)
     assert coord.returncode == 0

@@ -45,7 +45,8 @@ def test_subsim_exits_with_code_0(cosim_bus: Bus, how: str) -> None:
 
 def test_subsim_exits_when_the_coordinator_goes_away() -> None:
     bus = Bus.open()
-    popen = subprocess.Popen(subsim_command("subsims.integrator", bus.endpoint, bus.run, "orphan"))
+    popen = subprocess.Popen(subsim_command("subsims.integrator", bus.endpoint, bus.run, "orphan"),
+                             env={**os.environ, **bus.subsim_env("orphan")})
     try:
         bus.attach("orphan")
         bus.session.close()
@@ -64,7 +65,8 @@ def _unused_port() -> int:
 
 def test_unreachable_endpoint_exits_with_a_clear_message() -> None:
     cmd = subsim_command("subsims.integrator", f"tcp/127.0.0.1:{_unused_port()}", "run-x", "lonely")
-    done = subprocess.run([*cmd, "--connect-timeout", "0.5"], capture_output=True, text=True, timeout=30)
+    env = {**os.environ, "COSIM_SECRET": "00" * 32}
+    done = subprocess.run([*cmd, "--connect-timeout", "0.5"], capture_output=True, text=True, timeout=30, env=env)
     assert done.returncode == 2
     assert "cannot reach the coordinator" in done.stderr and "lonely" in done.stderr
 

@@ -239,17 +239,21 @@ def test_an_external_subsim_that_disappears_is_waited_for_and_restored(tmp_path:
     try:
         command = None
         assert coord.stderr is not None
+        env = dict(os.environ)
         for line in coord.stderr:
-            if line.strip().startswith("python -m cosim.serve"):
-                command = [sys.executable, *line.split()[1:]]
+            words = line.split()
+            if "cosim.serve" in words:  # VAR=value ... python -m cosim.serve ... (the run's secrets go in the env)
+                at = words.index("python")
+                env.update(w.split("=", 1) for w in words[:at])
+                command = [sys.executable, *words[at + 1:]]
                 break
         assert command is not None
-        users.append(subprocess.Popen(command, stderr=subprocess.DEVNULL))
+        users.append(subprocess.Popen(command, stderr=subprocess.DEVNULL, env=env))
         time.sleep(2.0)  # mid-run
         users[0].kill()
         users[0].wait()
         time.sleep(0.5)
-        users.append(subprocess.Popen(command, stderr=subprocess.DEVNULL))
+        users.append(subprocess.Popen(command, stderr=subprocess.DEVNULL, env=env))
         _, err = coord.communicate(timeout=300)
         assert coord.returncode == 0, err
         assert "mass2 died" in err

@@ -7,7 +7,7 @@ Every key of a run lives under ``cosim/<run>/``: ``<subsim>/rpc`` (the subsim's 
 from __future__ import annotations
 
 import re
-import uuid
+import secrets
 
 KEY_ROOT = "cosim"
 _NAME = re.compile(r"^[A-Za-z0-9_.\-]{1,64}$")
@@ -21,7 +21,8 @@ def check_name(value: str, what: str) -> str:
 
 
 def new_run_id() -> str:
-    return "run-" + uuid.uuid4().hex[:12]
+    """``run-`` and 128 random bits from :mod:`secrets` (32 hex digits): not guessable, not enumerable."""
+    return "run-" + secrets.token_hex(16)
 
 
 def rpc_key(run: str, subsim: str) -> str:

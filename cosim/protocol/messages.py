@@ -6,10 +6,23 @@ Reply:    ``{"v": 1, "ok": true, "result": {...}}`` or
 
 Requests are strict (unknown fields are errors); replies ignore unknown fields so a subsim may
 report more than this version knows. See docs/protocol.md.
+
+Over a bus every request and reply is *sealed* with the subsim's key (section 4.1 of docs/protocol.md):
+
+    request frame:  body || seq (8 bytes, big-endian) || HMAC-SHA256(key, "cosim-request" 0 seq body)
+    reply frame:    body || HMAC-SHA256(key, "cosim-reply" 0 seq body)
+
+A subsim accepts each ``seq`` once, and none more than a small window below the highest it accepted
+(``cosim.protocol.service.REPLAY_WINDOW``), so a recorded request cannot be replayed; the reply tag
+binds each reply to its request.
 """
 
 from __future__ import annotations
 
+import hashlib
+import hmac
+import itertools
+import time
 from dataclasses import dataclass
 from typing import Any
 
@@ -195,3 +208,58 @@ def decode_reply(cmd: str, payload: bytes) -> dict[str, Any] | ErrorInfo:
         raise
     except Exception as exc:
         raise ProtocolError("bad_request", f"undecodable reply ({type(exc).__name__})") from None
+
+
+# --- sealed frames ------------------------------------------------------------------------------
+
+SEQ_BYTES = 8
+TAG_BYTES = 32
+SEAL_BYTES = SEQ_BYTES + TAG_BYTES
+_REQUEST = b"cosim-request\0"
+_REPLY = b"cosim-reply\0"
+
+# One counter per process, started from the clock: strictly increasing across every handle of this
+# coordinator, and above the numbers of an earlier coordinator process of the same run.
+_sequence = itertools.count(time.time_ns())
+
+
+def next_seq() -> int:
+    return next(_sequence)
+
+
+def _tag(key: bytes, domain: bytes, seq8: bytes, body: bytes | memoryview) -> bytes:
+    mac = hmac.new(key, domain, hashlib.sha256)
+    mac.update(seq8)
+    mac.update(body)
+    return mac.digest()
+
+
+def seal_request(key: bytes, seq: int, body: bytes) -> bytes:
+    seq8 = seq.to_bytes(SEQ_BYTES, "big")
+    return body + seq8 + _tag(key, _REQUEST, seq8, body)
+
+
+def open_request(key: bytes, frame: bytes) -> tuple[int, memoryview] | None:
+    """``(seq, body)`` of a request sealed with ``key``; ``None`` when the frame is not (short, wrong tag)."""
+    if len(frame) < SEAL_BYTES:
+        return None
+    view = memoryview(frame)
+    body, seq8, tag = view[:-SEAL_BYTES], bytes(view[-SEAL_BYTES:-TAG_BYTES]), view[-TAG_BYTES:]
+    if not hmac.compare_digest(_tag(key, _REQUEST, seq8, body), tag):
+        return None
+    return int.from_bytes(seq8, "big"), body
+
+
+def seal_reply(key: bytes, seq: int, body: bytes) -> bytes:
+    return body + _tag(key, _REPLY, seq.to_bytes(SEQ_BYTES, "big"), body)
+
+
+def open_reply(key: bytes, seq: int, frame: bytes) -> memoryview | None:
+    """The body of a reply to request ``seq`` sealed with ``key``; ``None`` when it is not."""
+    if len(frame) < TAG_BYTES:
+        return None
+    view = memoryview(frame)
+    body, tag = view[:-TAG_BYTES], view[-TAG_BYTES:]
+    if not hmac.compare_digest(_tag(key, _REPLY, seq.to_bytes(SEQ_BYTES, "big"), body), tag):
+        return None
+    return body

@@ -1,20 +1,43 @@
 """One request payload in, one reply payload out, for one runtime: the subsim side without a transport.
 
-Any transport (Zenoh here; a test, a pipe, another bus) serves a subsim by calling :func:`answer`.
+Any transport (Zenoh here; a test, a pipe, another bus) serves a subsim by calling :func:`answer`,
+or, for sealed frames from a bus, through a :class:`Gate`: size cap and tag check where the transport
+receives (cheap, nothing decoded), replay check and :func:`answer` on the serving thread.
 """
 
 from __future__ import annotations
 
 import logging
+from collections import Counter
+from collections.abc import Mapping
+from dataclasses import dataclass
 
 from cosim.contract import CosimError
-from cosim.protocol.messages import decode_request, encode_error, encode_result, request_command
+from cosim.protocol.messages import (
+    SEAL_BYTES,
+    decode_request,
+    encode_error,
+    encode_result,
+    open_request,
+    request_command,
+    seal_reply,
+)
 from cosim.runtime import Runtime
+from cosim.subsim import Port
 
 log = logging.getLogger(__name__)
 
+# The default request cap: CAP_FACTOR times a run_interval of MAX_SAMPLES samples over every input
+# port (t and the inputs, 8 bytes a value, plus envelope), never below CAP_FLOOR (configure's params).
+MAX_SAMPLES = 10_000
+CAP_FACTOR = 4
+CAP_FLOOR = 1 << 20
+# Sequence numbers accepted out of order, below the highest accepted (several coordinator threads may
+# send to one subsim); each number is still accepted only once.
+REPLAY_WINDOW = 1024
 
-def answer(runtime: Runtime, payload: bytes) -> bytes:
+
+def answer(runtime: Runtime, payload: bytes | memoryview) -> bytes:
     """Turn one request payload into one reply payload. Never raises."""
     cmd = "?"
     try:
@@ -28,3 +51,88 @@ def answer(runtime: Runtime, payload: bytes) -> bytes:
     except Exception as exc:  # last line of defence: the process must survive any request
         log.exception("unexpected failure serving %s", cmd)
         return encode_error("internal", f"{type(exc).__name__}: {exc}", runtime.name, cmd)
+
+
+def default_request_cap(inputs: Mapping[str, Port]) -> int:
+    """Bytes a request may have: a few times the largest legitimate ``run_interval`` for these ports."""
+    values = MAX_SAMPLES * (1 + sum(p.size for p in inputs.values()))
+    return max(CAP_FLOOR, CAP_FACTOR * (8 * values + 256 * (1 + len(inputs))))
+
+
+@dataclass(frozen=True)
+class Admitted:
+    """A request whose size and tag passed; ``seq`` is -1 when the gate has no key."""
+
+    seq: int
+    body: bytes | memoryview
+
+
+class Gate:
+    """The subsim's door for sealed frames (docs/protocol.md 4.1).
+
+    :meth:`admit` runs where the transport receives, must never block and decodes nothing: a frame over
+    the cap gets a ``too_large`` reply, a frame without this subsim's tag is dropped without a word.
+    :meth:`answer` runs on the serving thread, in arrival order: a sequence number accepted before, or
+    more than ``REPLAY_WINDOW`` below the highest accepted, is a replay and is dropped; anything else
+    is decoded and answered. ``key=None`` turns
+    sealing off (frames are bare request bodies), for transports that authenticate otherwise.
+    ``counts`` tallies what happened (admitted, dropped, replayed, too_large, busy).
+    """
+
+    def __init__(self, runtime: Runtime, key: bytes | None, max_request: int | None = None) -> None:
+        self.runtime, self.key, self.max_request = runtime, key, max_request
+        self.last_seq = -1  # the highest sequence number accepted
+        self._recent: set[int] = set()  # those accepted within the window below it
+        self.counts: Counter[str] = Counter()
+
+    @property
+    def cap(self) -> int:
+        return self.max_request if self.max_request is not None else default_request_cap(self.runtime.inputs)
+
+    def admit(self, frame: bytes) -> tuple[Admitted | None, bytes | None]:
+        """``(request, None)`` to queue; ``(None, reply)`` to send at once; ``(None, None)`` to drop."""
+        opened = (-1, frame) if self.key is None else open_request(self.key, frame)
+        if opened is None:
+            self.counts["dropped"] += 1
+            return None, None
+        seq, body = opened
+        cap = self.cap
+        if len(body) > cap:
+            self.counts["too_large"] += 1
+            msg = f"request of {len(body)} bytes is over this subsim's cap of {cap} bytes; raise it with --max-request"
+            return None, self._error(seq, "too_large", msg)
+        self.counts["admitted"] += 1
+        return Admitted(seq, body), None
+
+    def answer(self, request: Admitted) -> bytes | None:
+        """The sealed reply, or ``None`` for a replayed request (dropped)."""
+        if self.key is not None and not self._fresh(request.seq):
+            self.counts["replayed"] += 1
+            return None
+        return self._seal(request.seq, answer(self.runtime, request.body))
+
+    def _fresh(self, seq: int) -> bool:
+        """Accept ``seq`` once, and only within the window below the highest accepted."""
+        if seq > self.last_seq:
+            self.last_seq = seq
+            self._recent.add(seq)
+            if len(self._recent) > 2 * REPLAY_WINDOW:
+                self._recent = {s for s in self._recent if s > seq - REPLAY_WINDOW}
+            return True
+        if seq <= self.last_seq - REPLAY_WINDOW or seq in self._recent:
+            return False
+        self._recent.add(seq)
+        return True
+
+    def busy(self, request: Admitted, queued: int) -> bytes:
+        self.counts["busy"] += 1
+        return self._error(request.seq, "busy", f"{queued} requests already queued; refused, nothing changed")
+
+    def _error(self, seq: int, code: str, message: str) -> bytes:
+        return self._seal(seq, encode_error(code, message, self.runtime.name, "?"))
+
+    def _seal(self, seq: int, body: bytes) -> bytes:
+        return body if self.key is None else seal_reply(self.key, seq, body)
+
+
+__all__ = ["SEAL_BYTES", "Admitted", "Gate", "answer", "default_request_cap"]

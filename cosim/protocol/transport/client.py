@@ -12,7 +12,7 @@ import zenoh
 from cosim.contract import ProtocolError, SubsimDied, SubsimError, SubsimHung
 from cosim.handles import SubsimHandle
 from cosim.protocol.keys import alive_key, check_name, rpc_key
-from cosim.protocol.messages import ErrorInfo, decode_reply, encode_request
+from cosim.protocol.messages import ErrorInfo, decode_reply, encode_request, next_seq, open_reply, seal_request
 
 
 class _Pending:
@@ -70,13 +70,19 @@ _WATCHDOG = _Watchdog()
 class RemoteHandle(SubsimHandle):
     """Zenoh request/reply to ``cosim/<run>/<name>/rpc``; liveliness reports a dead process at once.
 
+
     ``timeout``: zenoh's own limit on a query. ``deadline`` (seconds, or None): how long a caller waits for
     a reply before it calls the subsim hung (``SubsimHung``); the driver sets it from measured request
     times, so a stopped or stuck process is found long before ``timeout``.
-    """
 
-    def __init__(self, session: zenoh.Session, run: str, name: str, timeout: float = 60.0) -> None:
+    With ``key`` (the subsim's key, :func:`cosim.protocol.security.subsim_key`) every request is sealed
+    and only a reply carrying the subsim's tag for that request is believed (docs/protocol.md 4.1)."""
+
+    def __init__(
+        self, session: zenoh.Session, run: str, name: str, timeout: float = 60.0, key: bytes | None = None
+    ) -> None:
         self.session, self.run, self.name = session, run, check_name(name, "subsim name")
+        self._secret = key
         self._key = rpc_key(run, name)
         self.timeout = timeout
         self.deadline: float | None = None
@@ -116,8 +122,11 @@ class RemoteHandle(SubsimHandle):
         if not self.wait_alive(timeout):
             raise SubsimError("no_responder", f"no process appeared within {timeout:g} s", self.name, "connect")
         while True:
-            replies = list(self.session.get(self._key, payload=encode_request("status"), timeout=1.0))
-            if replies and replies[0].ok is not None:
+            seq, frame = self._seal(encode_request("status"))
+            replies = self.session.get(
+                self._key, payload=frame, timeout=1.0, consolidation=zenoh.ConsolidationMode.NONE
+            )
+            if any(r.ok is not None and self._open(seq, r.ok.payload.to_bytes()) is not None for r in replies):
                 return
             if time.monotonic() > deadline:
                 raise SubsimError("no_responder", f"not answering after {timeout:g} s", self.name, "connect")
@@ -126,7 +135,7 @@ class RemoteHandle(SubsimHandle):
     def _begin(self, cmd: str, args: dict[str, Any]) -> Callable[[], dict]:
         if self._died.is_set():
             raise SubsimDied("no_responder", "the subsim process is gone (liveliness lost)", self.name, cmd)
-        payload = encode_request(cmd, args)
+        seq, payload = self._seal(encode_request(cmd, args))
         token = zenoh.CancellationToken()
         if self.timeout == self._querier_timeout:
             replies = self._querier.get(payload=payload, cancellation_token=token)
@@ -138,32 +147,52 @@ class RemoteHandle(SubsimHandle):
         self._in_flight.add(pending)
         if deadline is not None:
             _WATCHDOG.watch(pending)
-        return lambda: self._finish(cmd, pending, deadline)
+        return lambda: self._finish(cmd, seq, pending, deadline)
 
-    def _finish(self, cmd: str, pending: _Pending, deadline: float | None) -> dict:
+    def _seal(self, body: bytes) -> tuple[int, bytes]:
+        if self._secret is None:
+            return -1, body
+        seq = next_seq()
+        return seq, seal_request(self._secret, seq, body)
+
+    def _open(self, seq: int, frame: bytes) -> bytes | memoryview | None:
+        return frame if self._secret is None else open_reply(self._secret, seq, frame)
+
+    def _finish(self, cmd: str, seq: int, pending: _Pending, deadline: float | None) -> dict:
         # blocks on the reply channel until the reply or the end of the query (zenoh's timeout, a death, or the
         # watchdog's cancel at the deadline); a waiting coordinator leaves the cores to the subsims
         try:
-            reply = next(iter(pending.replies), None)
+            return self._first_genuine(cmd, seq, pending, deadline)
         finally:
             self._in_flight.discard(pending)
             _WATCHDOG.forget(pending)
-        if reply is None and pending.hung:
-            raise SubsimHung("timeout", f"no reply within the {deadline:g} s deadline (hung or stopped?)",
-                             self.name, cmd)
-        if reply is not None:
+
+    def _first_genuine(self, cmd: str, seq: int, pending: _Pending, deadline: float | None) -> dict:
+        forged = 0
+        for reply in pending.replies:
             if reply.ok is None:
                 text = reply.err.payload.to_bytes().decode(errors="replace")
                 if self._died.is_set():
                     raise SubsimDied("no_responder", f"the process died during the request ({text})", self.name, cmd)
                 raise SubsimError("timeout", f"no reply within {self.timeout:g} s ({text})", self.name, cmd)
+            body = self._open(seq, reply.ok.payload.to_bytes())
+            if body is None:  # not sealed with this subsim's key for this request: not from our subsim
+                forged += 1
+                continue
             try:
-                result = decode_reply(cmd, reply.ok.payload.to_bytes())
+                result = decode_reply(cmd, body)
             except ProtocolError as exc:
                 raise SubsimError(exc.code, f"malformed reply: {exc.message}", self.name, cmd) from None
             if isinstance(result, ErrorInfo):
-                raise SubsimError(result.code, result.message, result.subsim, result.command)
+                raise SubsimError(result.code, result.message, result.subsim,
+                                  cmd if result.command == "?" else result.command)
             return result
+        if pending.hung:
+            raise SubsimHung("timeout", f"no reply within the {deadline:g} s deadline (hung or stopped?)",
+                             self.name, cmd)
+        if forged:
+            raise SubsimError("unauthenticated", f"{forged} reply(ies) without this subsim's tag: is it running with "
+                              "the key cosim gave it (COSIM_SECRET)?", self.name, cmd)
         # zero replies: nobody serves the key (not started, or died mid-request)
         self._died.wait(0.5 if self._alive.is_set() else 0.0)
         reason = "the process died during the request" if self._died.is_set() else "no process serves this subsim"

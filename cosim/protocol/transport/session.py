@@ -3,16 +3,23 @@
 Topology: the coordinator's session is a ``router`` listening on an endpoint; every subsim is a
 ``client`` connected to it. Multicast scouting is always off (runs and tests never find each
 other); shared memory is off (small payloads, and SHM-promoted queries can be dropped under
-load, eclipse-zenoh/zenoh#2628).
+load, eclipse-zenoh/zenoh#2628). The admin space is closed unless asked for; a run's router admits
+only logins it knows and applies access control to the run's keys (docs/reliability.md).
 """
 
 from __future__ import annotations
 
 import json
 import os
+import socket
+import tempfile
+from pathlib import Path
 from typing import Any
 
 import zenoh
+
+from cosim.protocol.keys import alive_key, coordinator_alive_key, rpc_key
+from cosim.protocol.security import ClientSecurity, Security
 
 # All of zenoh's internal thread pools (app, rx, tx, acc, net) handed over to one thread. On a 2-core
 # machine this cut a small request/reply from 225 to 150 us and the CPU per request by about 40 %, since
@@ -45,37 +52,115 @@ def make_config(
     return conf
 
 
-def client_config(endpoint: str, connect_timeout_s: float, lease_ms: int = 10000) -> zenoh.Config:
+def client_config(
+    endpoint: str, connect_timeout_s: float, lease_ms: int = 10000, security: ClientSecurity | None = None
+) -> zenoh.Config:
     """A subsim's session. ``lease_ms`` only bounds how long a *hung* process goes unnoticed (a killed one
     is seen at once: its socket closes); 3 s proved too short on a loaded 2-core machine, where a busy
-    router missed keepalives and dropped healthy subsims."""
-    return make_config(
-        "client",
-        connect=[endpoint],
-        extra={"connect/timeout_ms": int(connect_timeout_s * 1000), "transport/link/tx/lease": lease_ms},
-    )
+    router missed keepalives and dropped healthy subsims. ``security``: the router's login, and the CA
+    (and client certificate) of a ``tls/`` endpoint."""
+    extra: dict[str, Any] = {"connect/timeout_ms": int(connect_timeout_s * 1000), "transport/link/tx/lease": lease_ms}
+    if security is not None and security.login is not None:
+        extra["transport/auth/usrpwd/user"], extra["transport/auth/usrpwd/password"] = security.login
+    if security is not None and security.tls_ca is not None:
+        extra["transport/link/tls/root_ca_certificate"] = str(security.tls_ca)
+    if security is not None and security.tls_cert is not None:
+        extra["transport/link/tls/enable_mtls"] = True
+        extra["transport/link/tls/connect_certificate"] = str(security.tls_cert)
+        extra["transport/link/tls/connect_private_key"] = str(security.tls_key)
+    return make_config("client", connect=[endpoint], extra=extra)
 
 
-def open_router(listen: str = "tcp/127.0.0.1:0") -> tuple[zenoh.Session, str]:
-    """Open the coordinator's router session; return it with the endpoint clients should connect to."""
-    session = zenoh.open(make_config("router", listen=[listen], extra={"adminspace/enabled": True}))
-    try:
-        endpoint = _bound_endpoint(session, listen)
-    except Exception:
-        session.close()
-        raise
-    return session, endpoint
+def access_control(run: str, users: list[str]) -> dict[str, Any]:
+    """Zenoh access control of a run's router: logged-in ``users`` may serve ``cosim/<run>/<subsim>/rpc``,
+    hold ``cosim/<run>/<subsim>/alive`` and watch ``cosim/<run>/@coordinator/alive``; nothing else passes,
+    in either direction (no wildcard queries or scans, no admin space, no other run's keys). The
+    coordinator's own session is the router, which access control does not filter."""
+    rpc, alive, coordinator = rpc_key(run, "*"), alive_key(run, "*"), coordinator_alive_key(run)
+
+    def rule(rule_id: str, flow: str, messages: list[str], key: str) -> dict[str, Any]:
+        return {"id": rule_id, "permission": "allow", "flows": [flow], "messages": messages, "key_exprs": [key]}
+
+    rules = [
+        rule("serve", "ingress", ["declare_queryable", "reply"], rpc),
+        rule("announce", "ingress", ["liveliness_token"], alive),
+        rule("watch", "ingress", ["declare_liveliness_subscriber", "liveliness_query"], coordinator),
+        rule("requests", "egress", ["query"], rpc),
+        rule("coordinator", "egress", ["liveliness_token", "reply"], coordinator),
+    ]
+    return {
+        "enabled": True,
+        "default_permission": "deny",
+        "rules": rules,
+        "subjects": [{"id": "subsims", "usernames": users}],
+        "policies": [{"id": "run", "rules": [r["id"] for r in rules], "subjects": ["subsims"]}],
+    }
 
 
-def _bound_endpoint(session: zenoh.Session, listen: str) -> str:
-    """Read the actual locator (port 0 becomes a real port) from the admin space."""
-    for reply in session.get(f"@/{session.zid()}/*", timeout=2.0):
-        if reply.ok is not None and str(reply.ok.key_expr).rsplit("/", 1)[-1] in ("router", "peer"):
-            locators = json.loads(reply.ok.payload.to_bytes())["locators"]
-            proto = listen.split("/", 1)[0]
-            for loc in locators:
-                if loc.startswith(proto + "/"):
-                    return loc
-            if locators:
-                return locators[0]
-    raise RuntimeError(f"could not read the bound locator of the router listening on {listen}")
+def open_router(
+    listen: str = "tcp/127.0.0.1:0",
+    run: str | None = None,
+    logins: dict[str, str] | None = None,
+    security: Security | None = None,
+) -> tuple[zenoh.Session, str]:
+    """Open the coordinator's router session; return it with the endpoint clients should connect to.
+
+    With ``run`` and ``logins`` (user -> password) the router admits only those logins and applies
+    :func:`access_control` for ``run``. ``security`` adds TLS (``tls/`` endpoints) and opens the admin
+    space when asked. Port 0 is replaced by a free port picked here (the admin space stays closed)."""
+    security = security or Security()
+    proto = listen.partition("/")[0]
+    host, port = _split_endpoint(listen) if proto in ("tcp", "tls") else ("", -1)  # e.g. unixsock-stream/...
+    if security.tls and proto != "tls":
+        raise ValueError(f"--listen {listen}: with a TLS certificate the endpoint must be tls/<host>:<port>")
+    if proto == "tls" and not security.tls:
+        raise ValueError(f"--listen {listen}: a tls/ endpoint needs --tls-cert and --tls-key (docs/reliability.md)")
+    extra: dict[str, Any] = {"adminspace/enabled": security.admin_space}
+    if security.tls:
+        extra["transport/link/tls/listen_certificate"] = str(security.tls_cert)
+        extra["transport/link/tls/listen_private_key"] = str(security.tls_key)
+        if security.mutual:
+            extra["transport/link/tls/enable_mtls"] = True
+            extra["transport/link/tls/root_ca_certificate"] = str(security.tls_ca)
+    with tempfile.TemporaryDirectory(prefix="cosim-auth-") as tmp:
+        if logins:
+            dictionary = Path(tmp) / "users"
+            fd = os.open(dictionary, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+            with os.fdopen(fd, "w") as f:
+                f.write("".join(f"{u}:{p}\n" for u, p in logins.items()))
+            extra["transport/auth/usrpwd/dictionary_file"] = str(dictionary)
+            if run is not None:
+                extra["access_control"] = access_control(run, sorted(logins))
+        tries = 5 if port == 0 else 1
+        for attempt in range(tries):
+            chosen = _free_port(host) if port == 0 else port
+            endpoint = f"{proto}/{host}:{chosen}" if port >= 0 else listen
+            try:  # the dictionary is read here; the directory goes when the router is open
+                session = zenoh.open(make_config("router", listen=[endpoint], extra=extra))
+                break
+            except zenoh.ZError as exc:
+                if attempt == tries - 1:
+                    raise RuntimeError(f"cannot listen on {endpoint}: {exc}"[:300]) from None
+    return session, _connectable(proto, host, chosen) if port >= 0 else listen
+
+
+def _split_endpoint(endpoint: str) -> tuple[str, int]:
+    host, colon, port = endpoint.partition("/")[2].rpartition(":")
+    if not colon or not host or not port.isdigit():
+        raise ValueError(f"endpoint {endpoint!r}: expected tcp/<host>:<port> or tls/<host>:<port>")
+    return host, int(port)
+
+
+def _free_port(host: str) -> int:
+    """A port that is free on ``host`` now (the router binds it right after; a lost race is retried)."""
+    bare = host.strip("[]")
+    family = socket.AF_INET6 if ":" in bare else socket.AF_INET
+    with socket.socket(family, socket.SOCK_STREAM) as s:
+        s.bind((socket.gethostbyname(bare) if family == socket.AF_INET else bare, 0))
+        return s.getsockname()[1]
+
+
+def _connectable(proto: str, host: str, port: int) -> str:
+    """Where local clients connect: a wildcard listen address becomes loopback."""
+    host = {"0.0.0.0": "127.0.0.1", "[::]": "[::1]"}.get(host, host)
+    return f"{proto}/{host}:{port}"

@@ -1,0 +1,151 @@
+"""Who may talk to a run: the run's secret, per-subsim keys, and the transport security settings.
+
+No transport and no I/O beyond reading the files it is given. The request/reply tags themselves are
+part of the codec (:mod:`cosim.protocol.messages`); see docs/reliability.md, "Security model".
+
+* Every run has a 256-bit **master secret**. Each subsim gets only its own **key**, derived from the
+  master secret, the run id and its name, so a subsim cannot sign for another one.
+* Launched subsims receive their key (and the run's Zenoh login) through the **environment**
+  (``COSIM_SECRET``, ``COSIM_ZENOH_AUTH``), never on the command line, which ``ps`` shows.
+* :class:`Security` names the certificate and credential files that switch on TLS and
+  user/password authentication for runs across machines.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import hmac
+import os
+import secrets
+from dataclasses import dataclass
+from pathlib import Path
+
+SECRET_ENV = "COSIM_SECRET"  # hex key of one subsim (64 hex digits)
+ZENOH_AUTH_ENV = "COSIM_ZENOH_AUTH"  # "user:password" of the router's login
+KEY_BYTES = 32
+
+
+def new_master_secret() -> bytes:
+    return secrets.token_bytes(KEY_BYTES)
+
+
+def subsim_key(master: bytes, run: str, name: str) -> bytes:
+    """The key subsim ``name`` of run ``run`` signs with: HMAC-SHA256(master, "cosim-subsim-key" 0 run 0 name)."""
+    return hmac.new(master, b"cosim-subsim-key\0" + run.encode() + b"\0" + name.encode(), hashlib.sha256).digest()
+
+
+def zenoh_login(master: bytes, run: str) -> tuple[str, str]:
+    """The run's own Zenoh user and password, derived from the master secret (nothing else to store)."""
+    password = hmac.new(master, b"cosim-zenoh-password\0" + run.encode(), hashlib.sha256).hexdigest()
+    return "cosim-" + run, password
+
+
+def parse_key(text: str, where: str = SECRET_ENV) -> bytes:
+    try:
+        key = bytes.fromhex(text.strip())
+    except ValueError:
+        raise ValueError(f"{where}: not hex; use the value cosim printed for this subsim") from None
+    if len(key) != KEY_BYTES:
+        raise ValueError(f"{where}: must be {2 * KEY_BYTES} hex digits, got {2 * len(key)}")
+    return key
+
+
+def parse_login(text: str, where: str) -> tuple[str, str]:
+    user, sep, password = text.strip().partition(":")
+    if not sep or not user or not password:
+        raise ValueError(f"{where}: expected 'user:password'")
+    return user, password
+
+
+def read_login(path: Path) -> tuple[str, str]:
+    """First ``user:password`` line of a credential file (a subsim's ``--auth-file``)."""
+    for line in _lines(path):
+        return parse_login(line, str(path))
+    raise ValueError(f"{path}: no 'user:password' line")
+
+
+def read_dictionary(path: Path) -> dict[str, str]:
+    """Every ``user:password`` line of the router's dictionary (``cosim run --auth-file``)."""
+    users = dict(parse_login(line, f"{path} line {i}") for i, line in enumerate(_lines(path), 1))
+    if not users:
+        raise ValueError(f"{path}: no 'user:password' line")
+    return users
+
+
+def _lines(path: Path) -> list[str]:
+    try:
+        text = Path(path).read_text()
+    except OSError as exc:
+        raise ValueError(f"cannot read credential file {path}: {exc.strerror}") from None
+    return [ln.strip() for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
+
+
+@dataclass(frozen=True)
+class Security:
+    """Transport security of a run (coordinator side). All ``None``: loopback defaults (see below).
+
+    ``tls_cert``/``tls_key``: the router's certificate and private key (PEM); with them the router
+    listens on ``tls/`` endpoints. ``tls_ca``: the CA that signed it, handed to launched subsims, and
+    with ``mutual`` also the CA that client certificates must chain to. ``auth_file``: ``user:password``
+    lines that may log in besides the run's own generated login. ``admin_space``: open Zenoh's admin
+    space (closed by default) to the coordinator's own session; access control still keeps clients
+    out. Whatever is set, the router always requires a login and applies access control to the run's
+    keys, and every request carries its subsim's tag.
+    """
+
+    tls_cert: Path | None = None
+    tls_key: Path | None = None
+    tls_ca: Path | None = None
+    mutual: bool = False
+    auth_file: Path | None = None
+    admin_space: bool = False
+
+    @property
+    def tls(self) -> bool:
+        return self.tls_cert is not None
+
+    def check(self) -> Security:
+        """Files exist and come in the pairs TLS needs; raises ``ValueError`` with one actionable line."""
+        if (self.tls_cert is None) != (self.tls_key is None):
+            raise ValueError("TLS needs both a certificate and its private key (--tls-cert and --tls-key)")
+        if self.mutual and (self.tls_ca is None or not self.tls):
+            raise ValueError("mutual TLS needs --tls-cert, --tls-key and --tls-ca (their CA)")
+        for what, path in (("tls_cert", self.tls_cert), ("tls_key", self.tls_key), ("tls_ca", self.tls_ca),
+                           ("auth_file", self.auth_file)):
+            if path is not None and not Path(path).is_file():
+                raise ValueError(f"{what}: no such file {path}")
+        if self.auth_file is not None:
+            read_dictionary(self.auth_file)
+        return self
+
+
+@dataclass(frozen=True)
+class ClientSecurity:
+    """What a subsim process needs to reach its coordinator: its key, a login, optionally TLS files."""
+
+    key: bytes
+    login: tuple[str, str] | None = None
+    tls_ca: Path | None = None
+    tls_cert: Path | None = None  # client certificate, for mutual TLS
+    tls_key: Path | None = None
+
+    @classmethod
+    def from_env(
+        cls,
+        environ: dict[str, str] | None = None,
+        auth_file: Path | None = None,
+        tls_ca: Path | None = None,
+        tls_cert: Path | None = None,
+        tls_key: Path | None = None,
+    ) -> ClientSecurity:
+        env = os.environ if environ is None else environ
+        text = env.get(SECRET_ENV)
+        if not text:
+            raise ValueError(f"{SECRET_ENV} is not set: start the subsim with the key cosim printed for it "
+                             f"({SECRET_ENV}=<hex> python -m ...)")
+        login = read_login(auth_file) if auth_file else None
+        if login is None and env.get(ZENOH_AUTH_ENV):
+            login = parse_login(env[ZENOH_AUTH_ENV], ZENOH_AUTH_ENV)
+        if (tls_cert is None) != (tls_key is None):
+            raise ValueError("a client certificate needs its private key (--tls-cert and --tls-key)")
+        return cls(parse_key(text), login, tls_ca, tls_cert, tls_key)

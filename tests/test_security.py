@@ -1,0 +1,187 @@
+"""Nobody outside the run can reach it (docs/reliability.md, "Security model"), with real processes on loopback.
+
+* a client without the run's login (or with another run's) cannot even connect to the router;
+* a logged-in client without the subsim's key gets no answer, finds no key by wildcard scans, and
+  cannot intercept the coordinator's requests; a recorded request replayed gets no answer;
+* an attacker process hammering ``cosim/**`` with ``shutdown`` and ``run_interval`` during a run
+  leaves the oscillator's result file byte-identical to an undisturbed run's.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+import zenoh
+
+from cosim.launch import Bus
+from cosim.protocol.keys import new_run_id, rpc_key
+from cosim.protocol.messages import decode_reply, encode_request, next_seq, open_reply, seal_request
+from cosim.protocol.security import ClientSecurity, zenoh_login
+from cosim.protocol.transport.session import client_config
+from cosim.runner import run_scenario
+from cosim.scenario import load
+
+ROOT = Path(__file__).parents[1]
+OSCILLATOR = ROOT / "scenarios" / "oscillator.toml"
+
+
+def open_client(bus: Bus, login: tuple[str, str] | None) -> zenoh.Session:
+    return zenoh.open(client_config(bus.endpoint, 2.0, security=ClientSecurity(bytes(32), login)))
+
+
+@pytest.fixture
+def served(cosim_bus: Bus) -> Iterator[Bus]:
+    proc = cosim_bus.spawn("subsims.integrator", "victim")
+    proc.handle.configure({})
+    proc.handle.run_interval(np.array([0.0, 0.5]), {"u": np.ones((2, 1))})
+    proc.handle.commit()
+    yield cosim_bus
+
+
+def test_run_ids_are_unguessable() -> None:
+    ids = {new_run_id() for _ in range(1000)}
+    assert len(ids) == 1000
+    assert all(len(i) == len("run-") + 32 and int(i[4:], 16) >= 0 for i in ids)  # 128 random bits
+
+
+@pytest.mark.parametrize("login", ["none", "wrong password", "another run's"])
+def test_client_without_the_runs_login_cannot_connect(cosim_bus: Bus, login: str) -> None:
+    user, password = zenoh_login(cosim_bus.secret, cosim_bus.run)
+    other = Bus.open()
+    try:
+        credentials = {"none": None, "wrong password": (user, password[::-1]),
+                       "another run's": zenoh_login(other.secret, other.run)}[login]
+        with pytest.raises(zenoh.ZError, match="Unable to connect"):
+            open_client(cosim_bus, credentials).close()
+    finally:
+        other.close()
+
+
+def test_logged_in_client_without_the_key_gets_nothing(served: Bus) -> None:
+    """Even with the run's own login (a leaked dictionary), no key means no answer, no scan, no interception."""
+    before = served.attach("victim").get_state()
+    session = open_client(served, zenoh_login(served.secret, served.run))
+    spy = open_client(served, zenoh_login(served.secret, served.run))  # its own session: not hit by our gets
+    try:
+        intercepted: list[str] = []
+        trap = spy.declare_queryable("cosim/**", lambda q: intercepted.append(str(q.key_expr)))
+        run = served.run
+        replies, found = 0, 0
+        for key in ("cosim/**", f"cosim/{run}/**", rpc_key(run, "victim"), f"cosim/{run}/*/rpc"):
+            for body in (encode_request("shutdown"), seal_request(bytes(32), next_seq(), encode_request("shutdown"))):
+                replies += sum(r.ok is not None for r in session.get(key, payload=body, timeout=1.0))
+            found += sum(r.ok is not None for r in session.liveliness().get(key, timeout=1.0))
+        own = f"@/{session.zid()}/"
+        admin = [str(r.ok.key_expr) for r in session.get("@/**", timeout=1.0)
+                 if r.ok is not None and not str(r.ok.key_expr).startswith(own)]
+        handle = served.attach("victim")  # the coordinator's requests still reach the subsim, and only it
+        assert handle.status()["name"] == "victim"
+        trap.undeclare()
+    finally:
+        session.close()
+        spy.close()
+    assert (replies, found, admin, intercepted) == (0, 0, [], [])
+    assert handle.get_state().time == before.time and np.array_equal(handle.get_state().state, before.state)
+
+
+def test_a_replayed_request_gets_no_answer(served: Bus) -> None:
+    key = served.key("victim")
+    seq = next_seq()
+    frame = seal_request(key, seq, encode_request("status"))
+
+    def send() -> list[bytes]:
+        replies = served.session.get(rpc_key(served.run, "victim"), payload=frame, timeout=5.0)
+        return [r.ok.payload.to_bytes() for r in replies if r.ok is not None]
+
+    first = send()
+    assert len(first) == 1
+    body = open_reply(key, seq, first[0])
+    assert body is not None and decode_reply("status", body)["name"] == "victim"
+    assert send() == []  # the same frame again: refused as a replay
+    assert served.attach("victim").status()["name"] == "victim"  # the subsim serves on
+
+
+def test_a_request_with_another_subsims_key_gets_no_answer(served: Bus) -> None:
+    frame = seal_request(served.key("someone-else"), next_seq(), encode_request("shutdown"))
+    replies = list(served.session.get(rpc_key(served.run, "victim"), payload=frame, timeout=5.0))
+    assert replies == []
+    assert served.attach("victim").status()["name"] == "victim"
+
+
+def _oscillator(out: Path, monkeypatch: pytest.MonkeyPatch | None = None, tmp: Path | None = None) -> dict:
+    """Run the oscillator over Zenoh; with ``monkeypatch``, an attacker process hammers the run meanwhile."""
+    attack: dict = {}
+    if monkeypatch is not None:
+        real_open = Bus.open
+
+        def open_under_attack(*args: object, **kwargs: object) -> Bus:
+            bus = real_open(*args, **kwargs)
+            user, password = zenoh_login(bus.secret, bus.run)  # the strongest outsider: it has the login
+            for who, login in (("logged-in", f"{user}:{password}"), ("anonymous", None)):
+                cmd = [sys.executable, str(ROOT / "tests" / "attacker.py"), bus.endpoint, bus.run]
+                popen = subprocess.Popen([*cmd, login] if login else cmd, stdout=subprocess.PIPE, text=True,
+                                         env={**os.environ, "PYTHONPATH": str(ROOT)})
+                attack[who] = popen
+                assert popen.stdout is not None and popen.stdout.readline().strip() == "ready"
+            return bus
+
+        monkeypatch.setattr(Bus, "open", open_under_attack)
+    try:
+        run_scenario(load(OSCILLATOR), method="distributed", stop=1.0, output=out, progress=False, log=lambda m: None)
+    finally:
+        for popen in attack.values():
+            popen.terminate()
+        counts = {who: popen.communicate(timeout=30)[0] for who, popen in attack.items()}
+        for popen in attack.values():
+            if popen.poll() is None:
+                popen.kill()
+                popen.wait()
+    return {who: json.loads(text.strip().splitlines()[-1]) for who, text in counts.items()}
+
+
+def test_attacks_during_a_run_leave_its_results_identical(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    _oscillator(tmp_path / "calm.csv")
+    attacks = _oscillator(tmp_path / "attacked.csv", monkeypatch)
+    print(attacks)
+    assert attacks["anonymous"]["connected"] is False
+    hit = attacks["logged-in"]
+    assert hit["connected"] and hit["sent"] > 0 and hit["rounds"] >= 1
+    assert (hit["replies"], hit["found"], hit["intercepted"]) == (0, 0, 0)
+    assert (tmp_path / "attacked.csv").read_bytes() == (tmp_path / "calm.csv").read_bytes()
+
+
+def test_a_wildcard_query_is_ignored_even_when_sealed_with_the_right_key(served: Bus) -> None:
+    """The subsim answers only queries on exactly its rpc key (the coordinator's own session is not filtered
+    by access control, so this reaches the subsim)."""
+    frame = seal_request(served.key("victim"), next_seq(), encode_request("shutdown"))
+    for key in ("cosim/**", f"cosim/{served.run}/**", f"cosim/{served.run}/*/rpc"):
+        assert list(served.session.get(key, payload=frame, timeout=5.0)) == []
+    assert served.attach("victim").status()["name"] == "victim"
+
+
+def test_the_gate_accepts_each_sequence_number_once_within_the_window() -> None:
+    from cosim.protocol.service import REPLAY_WINDOW, Gate
+    from cosim.runtime import Runtime
+    from subsims.integrator.subsim import Integrator
+
+    key = bytes(range(32))
+    gate = Gate(Runtime(Integrator), key)
+
+    def answered(seq: int) -> bool:
+        admitted, _ = gate.admit(seal_request(key, seq, encode_request("status")))
+        return admitted is not None and gate.answer(admitted) is not None
+
+    base = 10**15
+    assert answered(base + 10) and answered(base + 12)
+    assert answered(base + 11)  # out of order, within the window: once
+    assert not answered(base + 11) and not answered(base + 12) and not answered(base + 10)  # replays
+    assert not answered(base + 12 - REPLAY_WINDOW)  # too far below the highest accepted
+    assert gate.admit(seal_request(bytes(32), base + 99, encode_request("status"))) == (None, None)  # wrong key
+    assert gate.counts["replayed"] == 4 and gate.counts["dropped"] == 1

@@ -1,0 +1,77 @@
+"""TLS and logins through Zenoh's own configuration, on loopback with real processes (docs/reliability.md)."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+import zenoh
+from certs import make_certs
+
+from cosim.launch import Bus
+from cosim.protocol.security import ClientSecurity, Security, zenoh_login
+from cosim.protocol.transport.session import client_config
+
+T = np.array([0.0, 0.5])
+
+
+@pytest.fixture(scope="module")
+def certs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    return make_certs(tmp_path_factory.mktemp("certs"))
+
+
+def tls_bus(certs: dict[str, Path], mutual: bool = False, auth_file: Path | None = None) -> Bus:
+    security = Security(certs["router_pem"], certs["router_key"], certs["ca_pem"], mutual=mutual, auth_file=auth_file)
+    return Bus.open("tls/localhost:0", security=security)
+
+
+@pytest.mark.parametrize("mutual", [False, True], ids=["server-cert", "mutual"])
+def test_a_subsim_serves_over_tls(certs: dict[str, Path], mutual: bool) -> None:
+    with tls_bus(certs, mutual) as bus:
+        assert bus.endpoint.startswith("tls/localhost:")
+        handle = bus.spawn("subsims.integrator", "secure").handle
+        handle.configure({})
+        result = handle.run_interval(T, {"u": np.ones((2, 1))})
+        assert result.outputs["y"][-1, 0] == pytest.approx(0.5)
+
+
+@pytest.mark.parametrize("what", ["no CA", "no login", "no client certificate"])
+def test_a_client_missing_a_piece_cannot_connect(certs: dict[str, Path], what: str) -> None:
+    with tls_bus(certs, mutual=True) as bus:
+        login = zenoh_login(bus.secret, bus.run)
+        full = {"login": login, "tls_ca": certs["ca_pem"], "tls_cert": certs["subsim_pem"],
+                "tls_key": certs["subsim_key"]}
+        zenoh.open(client_config(bus.endpoint, 2.0, security=ClientSecurity(bytes(32), **full))).close()  # control
+        drop = {"no CA": ("tls_ca",), "no login": ("login",), "no client certificate": ("tls_cert", "tls_key")}[what]
+        partial = ClientSecurity(bytes(32), **{k: v for k, v in full.items() if k not in drop})
+        with pytest.raises(zenoh.ZError, match="Unable to connect"):
+            zenoh.open(client_config(bus.endpoint, 2.0, security=partial)).close()
+
+
+def test_an_auth_file_login_serves_an_external_subsim(certs: dict[str, Path], tmp_path: Path) -> None:
+    """A subsim started by hand with --auth-file (one of the router's dictionary lines) and its key."""
+    users = tmp_path / "users"
+    users.write_text("# operators\nsite-b:correct horse battery staple\n")
+    mine = tmp_path / "site-b"
+    mine.write_text("site-b:correct horse battery staple\n")
+    with tls_bus(certs, auth_file=users) as bus:
+        cmd = [*bus.command("subsims.integrator", "remote"), "--auth-file", str(mine)]
+        env = {**os.environ, "COSIM_SECRET": bus.key("remote").hex()}
+        popen = subprocess.Popen(cmd, env=env)
+        try:
+            handle = bus.attach("remote", wait=30.0)
+            assert handle.configure({}).name == "remote"
+            handle.shutdown()
+            assert popen.wait(10) == 0
+        finally:
+            if popen.poll() is None:
+                popen.kill()
+                popen.wait()
+
+
+def test_a_tls_endpoint_without_a_certificate_is_refused_with_a_clear_message() -> None:
+    with pytest.raises(ValueError, match="--tls-cert"):
+        Bus.open("tls/localhost:0")

@@ -1,0 +1,176 @@
+"""Two hosts for real: two network namespaces joined by a veth pair, TLS between them.
+
+The coordinator runs ``cosim run`` in one namespace, listening on its end of a private /30; the
+oscillator's ``mass2`` is external and is started from the other namespace with the command and the
+two environment variables the coordinator printed. The result file must equal, byte for byte, the
+one of the same scenario run on one machine. A second test cuts the link under a running subsim and
+prints how long the coordinator takes to notice (measured, not asserted: restart is not ours).
+
+Needs root and ``ip netns`` (skips saying why otherwise). Namespaces, links and addresses are unique
+per test run and are removed even when the test fails.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import secrets
+import shlex
+import shutil
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+from certs import make_certs
+
+from cosim.runner import run_scenario
+from cosim.scenario import load
+
+ROOT = Path(__file__).parents[1]
+OSCILLATOR = ROOT / "scenarios" / "oscillator.toml"
+
+
+def _ip(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(["ip", *args], capture_output=True, text=True, timeout=30)
+
+
+@dataclass
+class Hosts:
+    a: str  # namespace of the coordinator
+    b: str  # namespace of the remote subsim
+    link_a: str
+    addr_a: str
+    addr_b: str
+
+    def exec(self, ns: str) -> list[str]:
+        return ["ip", "netns", "exec", ns]
+
+
+@pytest.fixture
+def hosts() -> Iterator[Hosts]:
+    if shutil.which("ip") is None:
+        pytest.skip("no 'ip' command (iproute2) to build network namespaces")
+    if os.geteuid() != 0:
+        pytest.skip("building network namespaces needs root")
+    tag = secrets.token_hex(3)
+    h = Hosts(f"cosim-{tag}-a", f"cosim-{tag}-b", f"cva{tag}", "", "")
+    octet = int(tag[:2], 16) % 250 + 1
+    base = int(tag[2:4], 16) // 4 * 4  # a /30: base + 1 and base + 2
+    h.addr_a, h.addr_b = f"10.231.{octet}.{base + 1}", f"10.231.{octet}.{base + 2}"
+    created: list[str] = []
+    try:
+        for ns in (h.a, h.b):
+            done = _ip("netns", "add", ns)
+            if done.returncode != 0:
+                pytest.skip(f"cannot create network namespaces here: {done.stderr.strip()}")
+            created.append(ns)
+        steps = [
+            ("link", "add", h.link_a, "netns", h.a, "type", "veth", "peer", "name", f"cvb{tag}", "netns", h.b),
+            ("-n", h.a, "addr", "add", f"{h.addr_a}/30", "dev", h.link_a),
+            ("-n", h.b, "addr", "add", f"{h.addr_b}/30", "dev", f"cvb{tag}"),
+            ("-n", h.a, "link", "set", h.link_a, "up"),
+            ("-n", h.b, "link", "set", f"cvb{tag}", "up"),
+            ("-n", h.a, "link", "set", "lo", "up"),
+            ("-n", h.b, "link", "set", "lo", "up"),
+        ]
+        for step in steps:
+            done = _ip(*step)
+            if done.returncode != 0:
+                pytest.skip(f"cannot build the veth pair: ip {' '.join(step)}: {done.stderr.strip()}")
+        yield h
+    finally:
+        for ns in created:  # deleting a namespace deletes its end of the veth pair, and so the pair
+            _ip("netns", "del", ns)
+
+
+def _stop(popen: subprocess.Popen) -> None:
+    if popen.poll() is None:
+        popen.terminate()
+        try:
+            popen.wait(10)
+        except subprocess.TimeoutExpired:
+            popen.kill()
+            popen.wait()
+
+
+def _external_command(stderr_line: str) -> tuple[dict[str, str], list[str]]:
+    """``VAR=value ... python -m cosim.serve ...`` as printed by the coordinator -> (environment, argv)."""
+    words = shlex.split(stderr_line)
+    env = dict(w.split("=", 1) for w in words if re.match(r"^[A-Z_]+=", w))
+    argv = [w for w in words if not re.match(r"^[A-Z_]+=", w)]
+    assert argv[0] == "python" and set(env) == {"COSIM_SECRET", "COSIM_ZENOH_AUTH"}, stderr_line
+    return env, [sys.executable, *argv[1:]]
+
+
+def test_a_subsim_attached_from_another_host_over_tls_gives_the_local_results(hosts: Hosts, tmp_path: Path) -> None:
+    certs = make_certs(tmp_path / "certs", f"IP:{hosts.addr_a}")
+    scenario = tmp_path / "oscillator-remote.toml"
+    scenario.write_text(OSCILLATOR.read_text().replace("[subsims.mass2]\n", "[subsims.mass2]\nexternal = true\n"))
+    local = tmp_path / "local.csv"
+    run_scenario(load(OSCILLATOR), method="distributed", stop=1.0, output=local, progress=False, log=lambda m: None)
+
+    remote = tmp_path / "remote.csv"
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "PYTHONUNBUFFERED": "1"}
+    coordinator = subprocess.Popen(
+        [*hosts.exec(hosts.a), sys.executable, "-m", "cosim.cli", "run", str(scenario), "--method", "distributed",
+         "--stop", "1.0", "--output", str(remote), "--quiet", "--listen", f"tls/{hosts.addr_a}:7447",
+         "--tls-cert", str(certs["router_pem"]), "--tls-key", str(certs["router_key"]),
+         "--tls-ca", str(certs["ca_pem"])],
+        env=env, stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True, cwd=tmp_path)
+    subsim = None
+    try:
+        assert coordinator.stderr is not None
+        seen = []
+        for line in coordinator.stderr:
+            seen.append(line)
+            if "COSIM_SECRET=" in line:
+                break
+        else:
+            pytest.fail(f"the coordinator printed no command for the external subsim: {''.join(seen)[-2000:]}")
+        secrets_env, argv = _external_command(line.strip())
+        assert f"tls/{hosts.addr_a}:7447" in argv and "--tls-ca" in argv
+        subsim = subprocess.Popen([*hosts.exec(hosts.b), *argv], env={**env, **secrets_env})
+        out, err = coordinator.communicate(timeout=600)
+        assert coordinator.returncode == 0, err[-2000:]
+        assert subsim.wait(30) == 0  # told to shut down when the run ended
+    finally:
+        _stop(coordinator)
+        if subsim is not None:
+            _stop(subsim)
+    assert remote.read_bytes() == local.read_bytes()
+
+
+def test_how_long_a_cut_link_takes_to_notice(hosts: Hosts, tmp_path: Path) -> None:
+    """Prints the detection time of a cut (veth down) on the coordinator side; asserts only that it is noticed."""
+    certs = make_certs(tmp_path / "certs", f"IP:{hosts.addr_a}")
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "PYTHONUNBUFFERED": "1"}
+    watcher = subprocess.Popen(
+        [*hosts.exec(hosts.a), sys.executable, str(ROOT / "tests" / "netns_coordinator.py"),
+         f"tls/{hosts.addr_a}:7447", str(certs["router_pem"]), str(certs["router_key"]), str(certs["ca_pem"])],
+        env=env, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    subsim = None
+    try:
+        assert watcher.stdout is not None and watcher.stdin is not None
+        start = json.loads(watcher.stdout.readline())
+        subsim = subprocess.Popen([*hosts.exec(hosts.b), *start["argv"]], env={**env, **start["env"]})
+        assert watcher.stdout.readline().strip() == "attached"
+        watcher.stdin.write("cut\n")
+        watcher.stdin.flush()
+        assert watcher.stdout.readline().strip() == "cutting"
+        cut = time.monotonic()
+        done = _ip("-n", hosts.a, "link", "set", hosts.link_a, "down")
+        assert done.returncode == 0, done.stderr
+        report = json.loads(watcher.stdout.readline())
+        print(f"\ncut link noticed by the coordinator after {report['seconds']:.2f} s ({report['how']})")
+        assert report["noticed"]
+        subsim_rc = subsim.wait(60)
+        print(f"the cut-off subsim exited with code {subsim_rc} {time.monotonic() - cut:.2f} s after the cut")
+    finally:
+        _stop(watcher)
+        if subsim is not None:
+            _stop(subsim)
