@@ -65,14 +65,17 @@ def _describe(args: argparse.Namespace) -> int:
             ins, outs = _ports(d.inputs), _ports(d.outputs)
             kind = "external" if scenario.subsims[name].external else scenario.subsims[name].model
             print(f"  {name} [{kind}]{' algebraic' if d.algebraic else ''}\n    in:  {ins or '-'}\n    out: {outs}")
+            given = scenario.subsims[name].params
+            for k, p in d.params.items():  # the model's declared parameters: the value used, unit, meaning
+                value = f"{given[k]!r}" if k in given else f"{p.default!r} (default)"
+                print(f"    param {k} = {value}{' ' + p.unit if p.unit else ''}{': ' + p.doc if p.doc else ''}")
         print("couplings:")
         for c in scenario.couplings:
             extra = f" via {c.transform_name}" if c.transform_name != "identity" else ""
             print(f"  {c}{extra}")
-        coupled = {str(c.target) for c in scenario.couplings}
-        loose = [f"{n}.{p}" for n, d in session.descriptions.items() for p in d.inputs if f"{n}.{p}" not in coupled]
-        if loose:
-            print(f"uncoupled inputs (held at zero): {', '.join(loose)}")
+        held = session.plans[scenario.default_method].held
+        if held:
+            print(f"held inputs: {'; '.join(f'{k} = {list(v)}' for k, v in held.items())}")
         for method in METHODS:
             st = scenario.settings_for(method)
             line = f"{method}: H = {st.interval:g}, {st.samples} samples, tol {st.tol.rel:g}/{st.tol.abs:g}, " \

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import zenoh
 
 from cosim.contract import SubsimError
+from cosim.importing import SEARCH_PATH
 from cosim.protocol.keys import coordinator_alive_key, new_run_id
 from cosim.protocol.transport.client import RemoteHandle
 from cosim.protocol.transport.session import open_router
@@ -94,6 +95,8 @@ class Bus:
         """Start ``python -m module`` (or ``cosim.serve model``) as subsim ``name``; wait until it answers."""
         env = dict(os.environ)
         env.setdefault("PYTHONUNBUFFERED", "1")
+        if SEARCH_PATH:  # the scenario's directory and the working directory (cosim.importing)
+            env["PYTHONPATH"] = os.pathsep.join([*filter(None, [env.get("PYTHONPATH")]), *SEARCH_PATH])
         popen = subprocess.Popen(
             subsim_command(module, self.endpoint, self.run, name, model),
             env=env,

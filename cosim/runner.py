@@ -7,8 +7,9 @@ from __future__ import annotations
 
 import sys
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
+from types import MappingProxyType
 
 from cosim.contract import SubsimError
 from cosim.coupler.couplings import CouplingError, SignalRef
@@ -108,9 +109,31 @@ def open_session(
 def build_plan(scenario: Scenario, descriptions: dict[str, Description], method: str) -> Plan:
     """The couplings checked against the described ports, once; errors name the scenario key."""
     try:
-        return plan_for(descriptions, scenario.couplings, scenario.settings_for(method))
+        plan = plan_for(descriptions, scenario.couplings, scenario.settings_for(method))
     except CouplingError as exc:
         raise ScenarioError(f"{scenario.path}: [couplings[{exc.index}]] {exc}") from None
+    return replace(plan, held=MappingProxyType(held_inputs(scenario, descriptions)))
+
+
+def held_inputs(scenario: Scenario, descriptions: dict[str, Description]) -> dict[str, tuple[float, ...]]:
+    """Every input is fed, by a coupling or by a constant of [subsims.<name>.inputs]; the constants."""
+    coupled, held = {str(c.target) for c in scenario.couplings}, {}
+    for name, d in descriptions.items():
+        given = scenario.subsims[name].inputs
+        for port, p in d.inputs.items():
+            if f"{name}.{port}" not in coupled and port not in given:
+                raise ScenarioError(f"{scenario.path}: [subsims.{name}.inputs] input {name}.{port} ({p.size} x "
+                                    f"{p.unit or 'unitless'}) is fed by no coupling: couple it ([[couplings]] to = "
+                                    f"\"{name}.{port}\") or hold it constant ({port} = {[0.0] * p.size})")
+        for port, values in given.items():
+            p, ref = d.inputs.get(port), f"{name}.{port}"
+            why = ("is no input" if p is None else "is fed by a coupling" if ref in coupled
+                   else f"takes {p.size} values, got {len(values)}" if len(values) != p.size else "")
+            if why:
+                raise ScenarioError(f"{scenario.path}: [subsims.{name}.inputs.{port}] {ref} {why} "
+                                    f"(inputs: {', '.join(d.inputs) or 'none'})")
+            held[ref] = values
+    return held
 
 
 def output_signals(scenario: Scenario, descriptions: dict[str, Description]) -> list[tuple[SignalRef, int]]:

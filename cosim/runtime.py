@@ -17,7 +17,7 @@ import numpy as np
 
 from cosim.contract import PROTOCOL_VERSION, CosimError
 from cosim.signals import SCHEMES, SegmentError, check_time_grid, interpolant
-from cosim.subsim import ModelError, Port, Subsim, as_ports
+from cosim.subsim import ModelError, Port, Subsim, as_ports, resolve_params
 
 DEFAULT_HISTORY = 32
 
@@ -120,6 +120,7 @@ class Runtime:
             "time": self.time,
             "history_limit": self.history_limit,
             "protocol": PROTOCOL_VERSION,
+            "params": {k: {"default": p.default, "unit": p.unit, "doc": p.doc} for k, p in self.model.params.items()},
         }
 
     def configure(self, params: Mapping[str, Any], t0: float = 0.0) -> dict:
@@ -127,7 +128,7 @@ class Runtime:
         t0 = self._finite_float(t0, "t0")
         model = self._new_model()
         try:
-            state = model.initial_state(dict(params))
+            state = model.initial_state(resolve_params(model.params, params))
             inputs, outputs = as_ports(model.inputs), as_ports(model.outputs)
         except ModelError as exc:
             raise CosimError("model_error", f"configure: {exc}") from None

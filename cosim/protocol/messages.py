@@ -28,6 +28,7 @@ from cosim.protocol.wire import (
     t_float,
     t_int,
     t_opt,
+    t_param_decls,
     t_params,
     t_port_map,
     t_str,
@@ -44,6 +45,7 @@ DESCRIPTION_FIELDS: Fields = {
     "time": (t_opt(t_float), False),
     "history_limit": (t_int, True),
     "protocol": (t_int, True),
+    "params": (t_param_decls, False),
 }
 
 REQUESTS: dict[str, Fields] = {

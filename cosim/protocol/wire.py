@@ -166,6 +166,13 @@ def t_params(v: Any, path: str) -> dict:
     return t_value(v, path)
 
 
+def t_param_decls(v: Any, path: str) -> dict[str, dict]:
+    """A description's declared parameters: name -> {"default": value, "unit": str, "doc": str}."""
+    if not isinstance(v, dict):
+        raise bad(path, "a map of parameter name -> {default, unit, doc}", v)
+    return {t_str(k, f"{path} key"): check_fields(d, PARAM_FIELDS, f"{path}.{k}", strict=False) for k, d in v.items()}
+
+
 def t_any_map(v: Any, path: str) -> dict:
     if not isinstance(v, dict):
         raise bad(path, "a map", v)
@@ -175,6 +182,7 @@ def t_any_map(v: Any, path: str) -> dict:
 Fields = dict[str, tuple[Checker, bool]]  # name -> (checker, required)
 
 PORT_FIELDS: Fields = {"size": (t_int, True), "unit": (t_str, False), "doc": (t_str, False)}
+PARAM_FIELDS: Fields = {"default": (t_value, False), "unit": (t_str, False), "doc": (t_str, False)}
 
 
 def check_fields(obj: Any, fields: Fields, path: str, strict: bool = True) -> dict:
