@@ -9,6 +9,7 @@ from pathlib import Path
 
 from cosim.contract import SubsimError
 from cosim.coupler.relaxation import METHODS, NotConverged
+from cosim.protocol.keys import check_name
 from cosim.runner import open_session, run_scenario
 from cosim.scenario import ScenarioError, load
 
@@ -34,7 +35,8 @@ def _run(args: argparse.Namespace) -> int:
         report = run_unified(scenario, stop=args.stop, output=args.output)
     else:
         report = run_scenario(scenario, method=args.method, stop=args.stop, output=args.output,
-                              inprocess=args.inprocess, listen=args.listen, progress=not args.quiet)
+                              inprocess=args.inprocess, listen=args.listen, progress=not args.quiet,
+                              run_id=args.run_id, attach_wait=args.attach_wait)
     s = report.summary
     hist = ", ".join(f"{k} stages: {v}" for k, v in sorted(s.stages.items()))
     print(f"{scenario.name} ({report.method}): {s.intervals} intervals to t = {s.t_end:.6g} in {s.wall_time:.2f} s"
@@ -104,6 +106,13 @@ def _plot(args: argparse.Namespace) -> int:
     return plot_command(args)
 
 
+def _run_id(text: str) -> str:
+    try:
+        return check_name(text, "--run-id")
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="cosim", description=__doc__)
     sub = p.add_subparsers(dest="command", required=True)
@@ -118,6 +127,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--inprocess", action="store_true", help="run every subsim in this process (no Zenoh)")
     r.add_argument("--listen", default="tcp/127.0.0.1:0",
                    help="router endpoint (default: loopback, free port; use tcp/0.0.0.0:7447 for other machines)")
+    r.add_argument("--run-id", type=_run_id, help="run id that namespaces every key (default: a fresh one)")
+    r.add_argument("--attach-wait", type=float, default=300.0, metavar="S",
+                   help="seconds to wait for each external subsim (default: 300)")
     r.add_argument("--quiet", action="store_true", help="no progress display")
     r.set_defaults(fn=_run)
 

@@ -15,7 +15,8 @@ import zenoh
 
 from cosim.contract import SubsimError
 from cosim.importing import SEARCH_PATH
-from cosim.protocol.keys import coordinator_alive_key, new_run_id
+from cosim.protocol.keys import coordinator_alive_key, new_run_id, rpc_key
+from cosim.protocol.messages import encode_request
 from cosim.protocol.transport.client import RemoteHandle
 from cosim.protocol.transport.session import open_router
 
@@ -65,6 +66,7 @@ class Bus:
     endpoint: str
     run: str
     processes: list[SubsimProcess] = field(default_factory=list)
+    attached: list[str] = field(default_factory=list)  # names of external subsims: sent shutdown on close
 
     @classmethod
     def open(cls, listen: str = "tcp/127.0.0.1:0", run: str | None = None) -> Bus:
@@ -81,6 +83,7 @@ class Bus:
         except Exception:
             handle.close()
             raise
+        self.attached.append(name)
         return handle
 
     def spawn(
@@ -114,10 +117,17 @@ class Bus:
         return proc
 
     def close(self) -> None:
-        """Stop every spawned process, then close the session (the order matters: see zenoh-notes P1)."""
+        """Send ``shutdown`` to attached subsims, stop every spawned process, undeclare the coordinator's
+        token, then close the session (the order matters: see zenoh-notes P1)."""
+        pending = [self.session.get(rpc_key(self.run, name), payload=encode_request("shutdown"), timeout=3.0)
+                   for name in self.attached]  # a subsim gone or busy is ended by the token's DELETE below
+        for replies in pending:
+            list(replies)
+        self.attached.clear()
         for proc in reversed(self.processes):
             proc.stop()
         self.processes.clear()
+        self._token.undeclare()
         self.session.close()
 
     def __enter__(self) -> Bus:

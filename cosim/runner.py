@@ -5,6 +5,7 @@ The I/O shell around the coupler: scenario in, processes up, :class:`~cosim.driv
 
 from __future__ import annotations
 
+import json
 import sys
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -64,8 +65,13 @@ def open_session(
     external_wait: float = 300.0,
     log: Log = _stderr,
     timeout: float = 120.0,
+    run_id: str | None = None,
 ) -> Session:
-    """Launch (or attach to) and configure every subsim. The caller must ``close()`` the session."""
+    """Launch (or attach to) and configure every subsim. The caller must ``close()`` the session.
+
+    An external subsim is waited for up to ``external_wait`` seconds; for each, ``log`` gets one
+    machine-readable line first: ``cosim-attach {"endpoint": ..., "run": ..., "name": ..., "command": [...]}``.
+    ``run_id`` fixes the run id (default: a fresh one) so that a launcher knows it in advance."""
     handles: dict[str, SubsimHandle] = {}
     bus = None
     if inprocess:
@@ -74,13 +80,15 @@ def open_session(
                 raise ScenarioError(f"{scenario.path}: [subsims.{name}] is external: cannot run it --inprocess")
             handles[name] = InProcessHandle(spec.model_class()(), name)
     else:
-        bus = Bus.open(listen)
+        bus = Bus.open(listen, run=run_id)
     session = Session(scenario, handles, {}, bus)
     try:
         if bus is not None:
             for name, spec in scenario.subsims.items():
                 if spec.external:
                     cmd = subsim_command("<your.subsim.module>", bus.endpoint, bus.run, name, spec.model)
+                    log("cosim-attach " + json.dumps({"endpoint": bus.endpoint, "run": bus.run, "name": name,
+                                                      "command": ["python", *cmd[1:]]}))
                     log(f"cosim: waiting up to {external_wait:g} s for external subsim {name!r}; start it with:\n"
                         f"  {' '.join(['python', *cmd[1:]])}\n"
                         f"  (from another machine: run cosim with --listen tcp/0.0.0.0:<port> and use this "
@@ -164,12 +172,15 @@ def run_scenario(
     progress: bool = True,
     log: Log = _stderr,
     on_interval: Callable[[Interval], None] | None = None,
+    run_id: str | None = None,
+    attach_wait: float = 300.0,
 ) -> RunReport:
     method = method or scenario.default_method
     settings = scenario.settings_for(method)
     stop = scenario.stop if stop is None else stop
     output = output or default_output(scenario, method)
-    session = open_session(scenario, inprocess=inprocess, listen=listen, log=log)
+    session = open_session(scenario, inprocess=inprocess, listen=listen, log=log, run_id=run_id,
+                           external_wait=attach_wait)
     try:
         coordinator = Coordinator(session.handles, session.plans[method], settings)
         writer = ResultWriter(output, output_signals(scenario, session.descriptions))

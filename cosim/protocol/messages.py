@@ -147,7 +147,7 @@ def encode_request(cmd: str, args: dict[str, Any] | None = None) -> bytes:
 def decode_request(payload: bytes) -> Request:
     """Decode and validate a request. Raises only ``ProtocolError``."""
     try:
-        msg = unpack_map(payload)
+        msg = unpack_map(payload, unique_keys=True)
         _check_version(msg)
         cmd = msg.get("cmd")
         if not isinstance(cmd, str):

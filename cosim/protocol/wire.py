@@ -32,10 +32,22 @@ def pack(obj: Any) -> bytes:
     return msgpack.packb(obj, use_bin_type=True)
 
 
-def unpack_map(payload: bytes) -> dict:
-    """Decode a msgpack payload that must be a map; any failure is a ``decode`` error."""
+def _unique_keys(pairs: list[tuple[Any, Any]]) -> dict:
+    out = dict(pairs)
+    if len(out) != len(pairs):
+        seen: set = set()
+        raise ValueError(f"duplicate map key {next(k for k, _ in pairs if k in seen or seen.add(k))!r}"[:80])
+    return out
+
+
+def unpack_map(payload: bytes, unique_keys: bool = False) -> dict:
+    """Decode a msgpack payload that must be a map; any failure is a ``decode`` error.
+
+    Trailing bytes after the map are an error. ``unique_keys``: a map anywhere in the payload that
+    repeats a key is an error too (requests); otherwise the last value of a repeated key wins (replies)."""
     try:
-        obj = msgpack.unpackb(payload, raw=False, strict_map_key=True)
+        hook = {"object_pairs_hook": _unique_keys} if unique_keys else {}
+        obj = msgpack.unpackb(payload, raw=False, strict_map_key=True, **hook)
     except Exception as exc:  # msgpack raises several unrelated types on garbage
         raise ProtocolError("decode", f"payload is not valid msgpack ({type(exc).__name__}: {exc})"[:200]) from None
     if not isinstance(obj, dict):
