@@ -168,7 +168,7 @@ def decode_request(payload: bytes) -> Request:
 def request_command(payload: bytes) -> str:
     """Best-effort command name of a payload, for error replies to requests that failed to decode."""
     try:
-        cmd = unpack_map(payload).get("cmd")
+        cmd = unpack_map(payload, unique_keys=True).get("cmd")
         return cmd if isinstance(cmd, str) else "?"
     except Exception:
         return "?"
