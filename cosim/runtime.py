@@ -7,6 +7,7 @@ Every command either succeeds or raises ``CosimError`` with nothing committed ch
 from __future__ import annotations
 
 import copy
+import math
 import os
 from collections import deque
 from collections.abc import Callable, Mapping
@@ -155,7 +156,7 @@ class Runtime:
             raise CosimError("bad_value", str(exc)) from None
         if times.size < 2:
             raise CosimError("bad_value", f"t must hold at least 2 sample times, got {times.size}")
-        if times[0] != t0 or times[:1].tobytes() != np.float64(t0).tobytes():  # bit for bit: -0.0 is not 0.0
+        if times[0] != t0 or (t0 == 0.0 and math.copysign(1.0, times[0]) != math.copysign(1.0, t0)):  # -0.0 != 0.0
             start, what = float(times[0]), "the trial to commit ends" if commit else "the committed time is"
             raise CosimError("time_mismatch", f"interval starts at t={start!r} but {what} {t0!r}")
         if interp not in SCHEMES:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -72,3 +74,19 @@ def test_shipped_models_refuse_typos(model: type[Subsim], typo: str, hint: str) 
     with pytest.raises(SubsimError) as err:
         InProcessHandle(model()).configure({typo: 1.0})
     assert f"did you mean {hint!r}" in err.value.message
+
+
+def test_a_scenario_typo_is_reported_as_the_scenario_page_says(tmp_path) -> None:
+    from pathlib import Path
+
+    from cosim.runner import open_session
+    from cosim.scenario import ScenarioError, load
+
+    root = Path(__file__).parents[1]
+    shown = re.search(r"suggesting the closest one: `oscillator.toml: (.*?)`", (root / "docs" / "scenarios.md")
+                      .read_text(), re.S).group(1).replace("\n  ", " ")
+    sc = tmp_path / "oscillator.toml"
+    sc.write_text((root / "scenarios" / "oscillator.toml").read_text().replace("u0 = 1.0", "u_0 = 1.0"))
+    with pytest.raises(ScenarioError) as err:
+        open_session(load(sc), inprocess=True).close()
+    assert str(err.value) == f"{sc}: {shown}"
