@@ -15,6 +15,7 @@ from cosim.contract import SubsimError
 from cosim.coupler.relaxation import METHODS, Interval, NotConverged
 from cosim.outputs import OutputError, OutputWriteError
 from cosim.preflight import UsageError, check_listen, check_stop, zenoh_error_line
+from cosim.protocol.keys import check_name
 from cosim.protocol.security import Security
 from cosim.runner import default_output, open_session, run_scenario
 from cosim.scenario import ScenarioError, load
@@ -68,7 +69,8 @@ def _run_until_done(args: argparse.Namespace, state: dict) -> int:
         report = run_scenario(scenario, method=method, stop=args.stop, output=output, inprocess=args.inprocess,
                               listen=args.listen, progress=not args.quiet, on_interval=committed,
                               overwrite=args.overwrite, restarts=args.restarts, timeout=args.timeout,
-                              security=_security(args, scenario.security))
+                              security=_security(args, scenario.security),
+                              run_id=args.run_id, attach_wait=args.attach_wait)
     s = report.summary
     hist = ", ".join(f"{k} stages: {v}" for k, v in sorted(s.stages.items()))
     print(f"{scenario.name} ({report.method}): {s.intervals} intervals to t = {s.t_end:.6g} in {s.wall_time:.2f} s"
@@ -119,14 +121,17 @@ def _describe(args: argparse.Namespace) -> int:
             ins, outs = _ports(d.inputs), _ports(d.outputs)
             kind = "external" if scenario.subsims[name].external else scenario.subsims[name].model
             print(f"  {name} [{kind}]{' algebraic' if d.algebraic else ''}\n    in:  {ins or '-'}\n    out: {outs}")
+            given = scenario.subsims[name].params
+            for k, p in d.params.items():  # the model's declared parameters: the value used, unit, meaning
+                value = f"{given[k]!r}" if k in given else f"{p.default!r} (default)"
+                print(f"    param {k} = {value}{' ' + p.unit if p.unit else ''}{': ' + p.doc if p.doc else ''}")
         print("couplings:")
         for c in scenario.couplings:
             extra = f" via {c.transform_name}" if c.transform_name != "identity" else ""
             print(f"  {c}{extra}")
-        coupled = {str(c.target) for c in scenario.couplings}
-        loose = [f"{n}.{p}" for n, d in session.descriptions.items() for p in d.inputs if f"{n}.{p}" not in coupled]
-        if loose:
-            print(f"uncoupled inputs (held at zero): {', '.join(loose)}")
+        held = session.plans[scenario.default_method].held
+        if held:
+            print(f"held inputs: {'; '.join(f'{k} = {list(v)}' for k, v in held.items())}")
         for method in METHODS:
             st = scenario.settings_for(method)
             line = f"{method}: H = {st.interval:g}, {st.samples} samples, tol {st.tol.rel:g}/{st.tol.abs:g}, " \
@@ -155,6 +160,13 @@ def _plot(args: argparse.Namespace) -> int:
     return plot_command(args)
 
 
+def _run_id(text: str) -> str:
+    try:
+        return check_name(text, "--run-id")
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="cosim", description=__doc__)
     p.add_argument("--version", action="version", version=f"cosim {__version__}")
@@ -171,6 +183,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--inprocess", action="store_true", help="run every subsim in this process (no Zenoh)")
     r.add_argument("--listen", default="tcp/127.0.0.1:0",
                    help="router endpoint (default: loopback, free port; use tcp/0.0.0.0:7447 for other machines)")
+    r.add_argument("--run-id", type=_run_id, help="run id that namespaces every key (default: a fresh one)")
+    r.add_argument("--attach-wait", type=float, default=300.0, metavar="S",
+                   help="seconds to wait for each external subsim (default: 300)")
     r.add_argument("--quiet", action="store_true", help="no progress display")
     r.add_argument("--restarts", type=int, metavar="N",
                    help="replace subsims that die or hang up to N times, restoring their committed state "

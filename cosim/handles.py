@@ -9,14 +9,14 @@ no transport.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from cosim.contract import CosimError, SubsimError
 from cosim.runtime import DEFAULT_HISTORY, Runtime
-from cosim.subsim import Port, Subsim
+from cosim.subsim import Param, Port, Subsim
 
 Pending = Callable[[], "IntervalResult"]
 
@@ -32,6 +32,7 @@ class Description:
     time: float | None
     history_limit: int
     protocol: int
+    params: dict[str, Param] = field(default_factory=dict)  # declared parameters (optional in a reply)
 
     @classmethod
     def from_result(cls, r: Mapping[str, Any]) -> Description:
@@ -41,6 +42,7 @@ class Description:
         return cls(
             r["name"], r["model"], ports(r["inputs"]), ports(r["outputs"]), r["algebraic"], r["configured"],
             r.get("time"), r["history_limit"], r["protocol"],
+            {k: Param(p.get("default"), p.get("unit", ""), p.get("doc", "")) for k, p in r.get("params", {}).items()},
         )
 
 

@@ -1,11 +1,33 @@
-"""Resolve ``"package.module:name"`` strings (models, transforms, unified references)."""
+"""Resolve ``"package.module:name"`` strings (models, transforms, unified references).
+
+A scenario names the user's own modules: :func:`add_search_path` puts the scenario file's
+directory and the working directory on the import path (at its end, so they never shadow an
+installed package), and :data:`SEARCH_PATH` lists what was added so that ``cosim.launch`` hands the
+same directories to the subsim processes it starts (through their ``PYTHONPATH``).
+"""
 
 from __future__ import annotations
 
 import importlib
+import os
+import sys
+from pathlib import Path
 from typing import Any
 
 from cosim.subsim import Subsim
+
+SEARCH_PATH: list[str] = []  # directories add_search_path put on sys.path, in order
+
+
+def add_search_path(*directories: str | Path) -> None:
+    """Append each directory (made absolute) to ``sys.path`` and :data:`SEARCH_PATH`, once."""
+    for d in directories:
+        path = os.path.abspath(d)
+        if path not in SEARCH_PATH:
+            SEARCH_PATH.append(path)
+        if path not in sys.path:
+            sys.path.append(path)
+            importlib.invalidate_caches()
 
 
 def import_object(path: str, what: str) -> Any:

@@ -15,7 +15,9 @@ from pathlib import Path
 import zenoh
 
 from cosim.contract import SubsimError
-from cosim.protocol.keys import coordinator_alive_key, new_run_id
+from cosim.importing import SEARCH_PATH
+from cosim.protocol.keys import coordinator_alive_key, new_run_id, rpc_key
+from cosim.protocol.messages import encode_request, next_seq, seal_request
 from cosim.protocol.security import (
     SECRET_ENV,
     ZENOH_AUTH_ENV,
@@ -97,6 +99,7 @@ class Bus:
     secret: bytes = field(default_factory=new_master_secret, repr=False)
     security: Security = field(default_factory=Security)
     processes: list[SubsimProcess] = field(default_factory=list)
+    attached: list[str] = field(default_factory=list)  # names of external subsims: sent shutdown on close
 
     @classmethod
     def open(cls, listen: str = "tcp/127.0.0.1:0", run: str | None = None, security: Security | None = None) -> Bus:
@@ -133,6 +136,7 @@ class Bus:
         except Exception:
             handle.close()
             raise
+        self.attached.append(name)
         return handle
 
     def spawn(
@@ -148,6 +152,8 @@ class Bus:
         """Start ``python -m module`` (or ``cosim.serve model``) as subsim ``name``; wait until it answers."""
         env = {**os.environ, **self.subsim_env(name)}
         env.setdefault("PYTHONUNBUFFERED", "1")
+        if SEARCH_PATH:  # the scenario's directory and the working directory (cosim.importing)
+            env["PYTHONPATH"] = os.pathsep.join([*filter(None, [env.get("PYTHONPATH")]), *SEARCH_PATH])
         popen = subprocess.Popen(
             self.command(module, name, model, lease=lease),
             env=env,
@@ -180,10 +186,18 @@ class Bus:
         return self.spawn(old.module, name, model=old.model, lease=old.lease, **spawn_args)  # type: ignore[arg-type]
 
     def close(self) -> None:
-        """Stop every spawned process, then close the session (the order matters: see zenoh-notes P1)."""
+        """Send ``shutdown`` to attached subsims, stop every spawned process, undeclare the coordinator's
+        token, then close the session (the order matters: see zenoh-notes P1)."""
+        pending = [self.session.get(rpc_key(self.run, name), timeout=3.0,
+                                    payload=seal_request(self.key(name), next_seq(), encode_request("shutdown")))
+                   for name in self.attached]  # a subsim gone or busy is ended by the token's DELETE below
+        for replies in pending:
+            list(replies)
+        self.attached.clear()
         for proc in reversed(self.processes):
             proc.stop()
         self.processes.clear()
+        self._token.undeclare()
         self.session.close()
 
     def __enter__(self) -> Bus:

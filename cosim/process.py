@@ -117,9 +117,14 @@ def main(model_cls: type[Subsim] | Subsim, argv: Sequence[str] | None = None) ->
         print(f"{args.name}: serving run {args.run} via {args.connect} (pid {os.getpid()})", file=sys.stderr)
         try:
             server.serve()
+            print(f"{args.name}: shutdown requested by the coordinator", file=sys.stderr)
         except _Stop as why:
             print(f"{args.name}: stopping on {why}", file=sys.stderr)
         finally:
+            # leaving anyway: a SIGTERM now (e.g. the coordinator's token deleted right after our shutdown
+            # reply) must not interrupt the clean-up and turn exit code 0 into a traceback
+            signal.signal(signal.SIGTERM, signal.SIG_IGN)
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
             server.close()
     finally:
         session.close()

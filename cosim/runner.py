@@ -5,10 +5,12 @@ The I/O shell around the coupler: scenario in, processes up, :class:`~cosim.driv
 
 from __future__ import annotations
 
+import json
 import sys
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
+from types import MappingProxyType
 
 from cosim import interrupt
 from cosim.contract import SubsimError
@@ -82,10 +84,14 @@ def open_session(
     log: Log = _stderr,
     timeout: float = 120.0,
     security: Security | None = None,
+    run_id: str | None = None,
 ) -> Session:
     """Launch (or attach to) and configure every subsim. The caller must ``close()`` the session.
 
-    ``security``: TLS and login files (else the scenario's ``[security]`` table, else loopback defaults)."""
+    ``security``: TLS and login files (else the scenario's ``[security]`` table, else loopback defaults).
+    An external subsim is waited for up to ``external_wait`` seconds; for each, ``log`` gets one
+    machine-readable line first: ``cosim-attach {"endpoint": ..., "run": ..., "name": ..., "command": [...],
+    "env": {...}}``. ``run_id`` fixes the run id (default: a fresh one) so that a launcher knows it in advance."""
     handles: dict[str, SubsimHandle] = {}
     bus = None
     if inprocess:
@@ -95,7 +101,7 @@ def open_session(
             handles[name] = InProcessHandle(spec.model_class()(), name)
     else:
         try:
-            bus = Bus.open(listen, security=security or scenario.security)
+            bus = Bus.open(listen, run=run_id, security=security or scenario.security)
         except (ValueError, RuntimeError) as exc:  # bad --listen or security files; port taken
             raise ScenarioError(f"cannot open the bus: {exc}") from None
     session = Session(scenario, handles, {}, bus, external_wait=external_wait, timeout=timeout)
@@ -105,6 +111,9 @@ def open_session(
                 if spec.external:
                     cmd = bus.command("<your.subsim.module>", name, spec.model)
                     env = " ".join(f"{k}={v}" for k, v in bus.subsim_env(name).items())
+                    log("cosim-attach " + json.dumps({"endpoint": bus.endpoint, "run": bus.run, "name": name,
+                                                      "command": ["python", *cmd[1:]],
+                                                      "env": bus.subsim_env(name)}))
                     log(f"cosim: waiting up to {external_wait:g} s for external subsim {name!r}; start it with:\n"
                         f"  {env} {' '.join(['python', *cmd[1:]])}\n"
                         f"  (the two variables are this run's secrets: hand them over privately)\n"
@@ -135,9 +144,31 @@ def open_session(
 def build_plan(scenario: Scenario, descriptions: dict[str, Description], method: str) -> Plan:
     """The couplings checked against the described ports, once; errors name the scenario key."""
     try:
-        return plan_for(descriptions, scenario.couplings, scenario.settings_for(method))
+        plan = plan_for(descriptions, scenario.couplings, scenario.settings_for(method))
     except CouplingError as exc:
         raise ScenarioError(f"{scenario.path}: [couplings[{exc.index}]] {exc}") from None
+    return replace(plan, held=MappingProxyType(held_inputs(scenario, descriptions)))
+
+
+def held_inputs(scenario: Scenario, descriptions: dict[str, Description]) -> dict[str, tuple[float, ...]]:
+    """Every input is fed, by a coupling or by a constant of [subsims.<name>.inputs]; the constants."""
+    coupled, held = {str(c.target) for c in scenario.couplings}, {}
+    for name, d in descriptions.items():
+        given = scenario.subsims[name].inputs
+        for port, p in d.inputs.items():
+            if f"{name}.{port}" not in coupled and port not in given:
+                raise ScenarioError(f"{scenario.path}: [subsims.{name}.inputs] input {name}.{port} ({p.size} x "
+                                    f"{p.unit or 'unitless'}) is fed by no coupling: couple it ([[couplings]] to = "
+                                    f"\"{name}.{port}\") or hold it constant ({port} = {[0.0] * p.size})")
+        for port, values in given.items():
+            p, ref = d.inputs.get(port), f"{name}.{port}"
+            why = ("is no input" if p is None else "is fed by a coupling" if ref in coupled
+                   else f"takes {p.size} values, got {len(values)}" if len(values) != p.size else "")
+            if why:
+                raise ScenarioError(f"{scenario.path}: [subsims.{name}.inputs.{port}] {ref} {why} "
+                                    f"(inputs: {', '.join(d.inputs) or 'none'})")
+            held[ref] = values
+    return held
 
 
 def output_signals(scenario: Scenario, descriptions: dict[str, Description]) -> list[tuple[SignalRef, int]]:
@@ -172,6 +203,8 @@ def run_scenario(
     restarts: int | None = None,
     timeout: float | None = None,
     security: Security | None = None,
+    run_id: str | None = None,
+    attach_wait: float = 300.0,
 ) -> RunReport:
     """Run ``scenario``. ``overwrite=False`` refuses an existing result (OutputError) before anything is
     launched; ``restarts`` and ``timeout`` override its [run] table (see ``cosim.scenario.KEYS``)."""
@@ -181,7 +214,8 @@ def run_scenario(
     output = output or default_output(scenario, method)
     lock = reserve_output(output, overwrite)  # locked and checked before anything is launched
     try:
-        session = open_session(scenario, inprocess=inprocess, listen=listen, log=log, security=security)
+        session = open_session(scenario, inprocess=inprocess, listen=listen, log=log, security=security,
+                               run_id=run_id, external_wait=attach_wait)
     except BaseException:
         lock.release()
         raise

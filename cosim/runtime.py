@@ -7,6 +7,7 @@ Every command either succeeds or raises ``CosimError`` with nothing committed ch
 from __future__ import annotations
 
 import copy
+import math
 import os
 from collections import deque
 from collections.abc import Callable, Mapping
@@ -17,7 +18,7 @@ import numpy as np
 
 from cosim.contract import PROTOCOL_VERSION, CosimError
 from cosim.signals import SCHEMES, SegmentError, check_time_grid, interpolant
-from cosim.subsim import ModelError, Port, Subsim, as_ports
+from cosim.subsim import ModelError, Port, Subsim, as_ports, resolve_params
 
 DEFAULT_HISTORY = 32
 
@@ -120,6 +121,7 @@ class Runtime:
             "time": self.time,
             "history_limit": self.history_limit,
             "protocol": PROTOCOL_VERSION,
+            "params": {k: {"default": p.default, "unit": p.unit, "doc": p.doc} for k, p in self.model.params.items()},
         }
 
     def configure(self, params: Mapping[str, Any], t0: float = 0.0) -> dict:
@@ -127,7 +129,7 @@ class Runtime:
         t0 = self._finite_float(t0, "t0")
         model = self._new_model()
         try:
-            state = model.initial_state(dict(params))
+            state = model.initial_state(resolve_params(model.params, params))
             inputs, outputs = as_ports(model.inputs), as_ports(model.outputs)
         except ModelError as exc:
             raise CosimError("model_error", f"configure: {exc}") from None
@@ -154,7 +156,7 @@ class Runtime:
             raise CosimError("bad_value", str(exc)) from None
         if times.size < 2:
             raise CosimError("bad_value", f"t must hold at least 2 sample times, got {times.size}")
-        if times[0] != t0:
+        if times[0] != t0 or (t0 == 0.0 and math.copysign(1.0, times[0]) != math.copysign(1.0, t0)):  # -0.0 != 0.0
             start, what = float(times[0]), "the trial to commit ends" if commit else "the committed time is"
             raise CosimError("time_mismatch", f"interval starts at t={start!r} but {what} {t0!r}")
         if interp not in SCHEMES:

@@ -21,7 +21,7 @@ from cosim.coupler.convergence import Tolerance
 from cosim.coupler.couplings import Coupling
 from cosim.coupler.order import check_order
 from cosim.coupler.relaxation import METHODS, Settings
-from cosim.importing import load_model
+from cosim.importing import add_search_path, load_model
 from cosim.protocol.keys import check_name
 from cosim.protocol.security import Security
 from cosim.subsim import Subsim
@@ -50,7 +50,10 @@ KEYS: dict[str, dict[str, Key]] = {
                      "'package.module:Class' of a cosim.Subsim; launched as its own process"),
         "external": Key("boolean", "false", "",
                         "true: not launched; cosim run prints the command to start it and waits for it"),
-        "params": Key("table", "{}", "", "parameters passed to the model's initial_state (the model's own keys)"),
+        "params": Key("table", "{}", "the parameter's",
+                      "parameters of the model's initial_state; a model that declares its parameters refuses others"),
+        "inputs": Key("table", "{}", "the port's",
+                      "constant values of inputs no coupling feeds: port = number or [numbers], one per channel"),
         "doc": Key("string", '""', "", "free text"),
         "fmu": Key("string", "none", "", "an FMU file instead of model (relative to the scenario file; needs the fmi "
                    "extra): stands for model = 'subsims.fmu:FmuSubsim' with params.fmu = the path (docs/fmi.md)"),
@@ -119,6 +122,7 @@ class SubsimSpec:
     model: str | None  # "package.module:Class"; None for an external subsim
     external: bool
     params: Mapping[str, Any]
+    inputs: Mapping[str, tuple[float, ...]] = field(default_factory=dict)  # held constant: port -> values
 
     def model_class(self) -> type[Subsim]:
         return load_model(self.model or "")
@@ -171,8 +175,11 @@ def _plugins(group: str) -> dict[str, Any]:
 
 
 def load(path: str | Path) -> Scenario:
-    """A scenario file: TOML, or a format a package registers under the ``cosim.formats`` entry points (.ssp)."""
+    """A scenario file: TOML, or a format a package registers under the ``cosim.formats`` entry points (.ssp).
+    Its directory and the working directory go on the import path first (see
+    :func:`cosim.importing.add_search_path`): a scenario may name modules beside it."""
     path = Path(path)
+    add_search_path(path.resolve().parent, Path.cwd())
     formats = _plugins("cosim.formats")
     suffix = path.suffix.lower().lstrip(".")
     if suffix != "toml" and suffix in formats:
@@ -275,7 +282,13 @@ class _Parser:
             except ValueError as exc:
                 raise self.fail(f"{key}.model", str(exc)) from None
         params = self.table(spec, "params", f"{key}.params")
-        return SubsimSpec(name, model, external, MappingProxyType(dict(params)))
+        inputs = {}
+        for port, value in self.table(spec, "inputs", f"{key}.inputs").items():
+            values = value if isinstance(value, list) else [value]
+            if not values or any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in values):
+                raise self.fail(f"{key}.inputs.{port}", f"must be a number or a list of numbers, got {value!r}")
+            inputs[port] = tuple(float(v) for v in values)
+        return SubsimSpec(name, model, external, MappingProxyType(dict(params)), MappingProxyType(inputs))
 
     def coupling(self, i: int, c: Mapping[str, Any], subsims: Mapping[str, SubsimSpec]) -> Coupling:
         key = f"couplings[{i}]"

@@ -6,9 +6,10 @@ all belong to :class:`cosim.runtime.Runtime`.
     class Integrator(Subsim):
         inputs = {"u": Port(1, "1/s")}
         outputs = {"y": Port(1)}
+        params = {"y0": Param(0.0, "", "initial value of y")}
 
-        def initial_state(self, params):
-            return np.array([params.get("y0", 0.0)])
+        def initial_state(self, params):          # every declared parameter is there: given or default
+            return np.array([params["y0"]])
 
         def advance(self, state, times, u):
             ...  # integrate from times[0] to times[-1], reading u(t)["u"]
@@ -17,6 +18,7 @@ all belong to :class:`cosim.runtime.Runtime`.
 
 from __future__ import annotations
 
+import difflib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any, ClassVar
@@ -57,6 +59,36 @@ def as_ports(specs: Mapping[str, PortSpec]) -> dict[str, Port]:
     return {name: as_port(spec) for name, spec in specs.items()}
 
 
+@dataclass(frozen=True)
+class Param:
+    """One declared model parameter: its default, unit and meaning.
+
+    The default is a plain value (number, string, bool, or a list/table of them), as in a scenario.
+    """
+
+    default: Any
+    unit: str = ""
+    doc: str = ""
+
+
+def resolve_params(declared: Mapping[str, Param], given: Mapping[str, Any]) -> dict[str, Any]:
+    """The parameters a model's ``initial_state`` sees: ``given`` over the declared defaults.
+
+    A model that declares no parameters takes ``given`` as it is. Otherwise a name it does not
+    declare is refused (ValueError listing the known names, with a "did you mean" when one is close).
+    """
+    if not declared:
+        return dict(given)
+    unknown = [k for k in given if k not in declared]
+    if unknown:
+        hints = []
+        for k in unknown:
+            close = difflib.get_close_matches(str(k), list(declared), n=1)
+            hints.append(f"{k!r} (did you mean {close[0]!r}?)" if close else repr(k))
+        raise ValueError(f"unknown parameter(s) {', '.join(hints)}; this model takes: {', '.join(declared)}")
+    return {**{k: p.default for k, p in declared.items()}, **given}
+
+
 class ModelError(RuntimeError):
     """Raised by a model when it cannot advance (e.g. an attitude singularity); reported, not fatal."""
 
@@ -70,12 +102,16 @@ class Subsim:
     - ``name``: default instance name on the bus.
     - ``inputs``, ``outputs``: ``{port name: Port | size | (size, unit[, doc])}``.
     - ``algebraic``: True when the model has no state (outputs depend on inputs only).
+    - ``params``: ``{parameter name: Param(default, unit, doc)}``. Optional; when given, ``configure``
+      refuses any other name and ``initial_state`` sees every declared one (given or default), and
+      ``describe`` (and ``cosim describe``) list them.
     """
 
     name: ClassVar[str] = "subsim"
     inputs: Mapping[str, PortSpec] = {}
     outputs: Mapping[str, PortSpec] = {}
     algebraic: ClassVar[bool] = False
+    params: ClassVar[Mapping[str, Param]] = {}
 
     def initial_state(self, params: Mapping[str, Any]) -> np.ndarray:
         """Read parameters (keep what ``advance`` needs on ``self``); return the state at t0.

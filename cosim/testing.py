@@ -3,7 +3,7 @@
 Installed with the package (entry point ``pytest11``), so a user's tests can simply write::
 
     def test_my_subsim(spawn_subsim):
-        handle = spawn_subsim("mypackage.mysubsim", name="thermal")
+        handle = spawn_subsim("mymodule:Thermal", name="thermal")    # or a package: "mypackage.mysubsim"
         handle.configure({"T0": 300.0})
         ...
 
@@ -33,9 +33,16 @@ def cosim_bus() -> Iterator[Bus]:
 
 @pytest.fixture
 def spawn_subsim(cosim_bus: Bus) -> Callable[..., RemoteHandle]:
-    """Factory: ``spawn_subsim(module, name=None, timeout=60.0) -> RemoteHandle``."""
+    """Factory: ``spawn_subsim(target, name=None, timeout=60.0) -> RemoteHandle``.
 
-    def spawn(module: str, name: str | None = None, timeout: float = 60.0) -> RemoteHandle:
-        return cosim_bus.spawn(module, name or module.rsplit(".", 1)[-1], timeout=timeout).handle
+    ``target`` is a subsim package run as ``python -m target`` (``"subsims.oscillator"``) or any model
+    class as ``"module:Class"``, served by ``python -m cosim.serve`` (``"wall_mass:WallMass"``). The
+    process starts in the test's working directory, so modules there are found. ``name`` defaults to
+    the last part of the module name."""
+
+    def spawn(target: str, name: str | None = None, timeout: float = 60.0) -> RemoteHandle:
+        module, _, cls = target.partition(":")
+        name = name or module.rsplit(".", 1)[-1]
+        return cosim_bus.spawn(module, name, timeout=timeout, model=target if cls else None).handle
 
     return spawn

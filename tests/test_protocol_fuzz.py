@@ -66,6 +66,7 @@ from cosim.protocol.wire import (
     t_bool,
     t_float,
     t_int,
+    t_param_decls,
     t_params,
     t_port_map,
     t_str,
@@ -259,6 +260,10 @@ def valid(check: Checker) -> st.SearchStrategy:
         return st.dictionaries(NAMES, port, max_size=3)
     if check is t_params:
         return st.dictionaries(st.text(max_size=6), params_values, max_size=4)
+    if check is t_param_decls:
+        decl = st.fixed_dictionaries({}, optional={"default": params_values, "unit": st.text(max_size=4),
+                                                   "doc": st.text(max_size=8)})
+        return st.dictionaries(NAMES, decl, max_size=3)
     if check is t_any_map:
         return st.dictionaries(st.text(max_size=6), params_values, max_size=4)
     raise AssertionError(f"no strategy for checker {check!r}: extend tests/test_protocol_fuzz.py")
@@ -305,6 +310,9 @@ def invalid(check: Checker) -> st.SearchStrategy:
             ),
             st.just(bad),
         )
+    if check is t_param_decls:
+        bad_decl = st.one_of(not_(dict), not_(str).map(lambda u: {"unit": u}), not_(str).map(lambda d: {"doc": d}))
+        return st.tuples(st.one_of(not_(dict), st.dictionaries(NAMES, bad_decl, min_size=1, max_size=2)), st.just(bad))
     if check is t_any_map:
         return st.tuples(not_(dict), st.just(bad))
     raise AssertionError(f"no strategy for checker {check!r}")

@@ -7,7 +7,7 @@ driver trust it and check nothing again.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from cosim.coupler.couplings import Coupling, Ports, SignalRef, check_couplings
 from cosim.coupler.order import check_order, derive_order, feedback_weight, is_feedback
@@ -22,6 +22,7 @@ class Plan:
     order: tuple[str, ...]  # the distributed method's execution order (declared order for centralized)
     feedback: tuple[Coupling, ...]  # couplings with a source at or after their target in ``order``
     forward: tuple[Coupling, ...]
+    held: Mapping[str, tuple[float, ...]] = field(default_factory=dict)  # "subsim.port" -> constant; else zero
 
     @property
     def sizes(self) -> dict[SignalRef, int]:

@@ -242,8 +242,12 @@ class Relaxation:
         return first_guess(self.settings.first_guess, times, sizes, self._previous, self.settings.interp)
 
     def _inputs_of(self, name: str, signals: Mapping[str, np.ndarray], n: int) -> dict[str, np.ndarray]:
-        """Inputs of ``name`` from coupled ``signals``; uncoupled inputs are zero."""
-        return {p: signals[k] if k in signals else np.zeros((n, w)) for p, k, w in self._ports[name]}
+        """Inputs of ``name`` from coupled ``signals``; an uncoupled input is its held constant, else zero."""
+        return {p: signals[k] if k in signals else self._uncoupled(k, n, w) for p, k, w in self._ports[name]}
+
+    def _uncoupled(self, key: str, n: int, width: int) -> np.ndarray:
+        held = self.plan.held.get(key)
+        return np.zeros((n, width)) if held is None else np.tile(np.asarray(held, dtype=np.float64), (n, 1))
 
     def _evaluate(self, c: Coupling, outputs: Mapping, n: int) -> np.ndarray:
         return c.evaluate(outputs, self._sizes[c.target], n)

@@ -41,6 +41,7 @@ from cosim.protocol.wire import (
     t_float,
     t_int,
     t_opt,
+    t_param_decls,
     t_params,
     t_port_map,
     t_str,
@@ -57,6 +58,7 @@ DESCRIPTION_FIELDS: Fields = {
     "time": (t_opt(t_float), False),
     "history_limit": (t_int, True),
     "protocol": (t_int, True),
+    "params": (t_param_decls, False),
 }
 
 REQUESTS: dict[str, Fields] = {
@@ -158,7 +160,7 @@ def encode_request(cmd: str, args: dict[str, Any] | None = None) -> bytes:
 def decode_request(payload: bytes) -> Request:
     """Decode and validate a request. Raises only ``ProtocolError``."""
     try:
-        msg = unpack_map(payload)
+        msg = unpack_map(payload, unique_keys=True)
         _check_version(msg)
         cmd = msg.get("cmd")
         if not isinstance(cmd, str):
@@ -179,7 +181,7 @@ def decode_request(payload: bytes) -> Request:
 def request_command(payload: bytes) -> str:
     """Best-effort command name of a payload, for error replies to requests that failed to decode."""
     try:
-        cmd = unpack_map(payload).get("cmd")
+        cmd = unpack_map(payload, unique_keys=True).get("cmd")
         return cmd if isinstance(cmd, str) else "?"
     except Exception:
         return "?"

@@ -32,10 +32,22 @@ def pack(obj: Any) -> bytes:
     return msgpack.packb(obj, use_bin_type=True)
 
 
-def unpack_map(payload: bytes) -> dict:
-    """Decode a msgpack payload that must be a map; any failure is a ``decode`` error."""
+def _unique_keys(pairs: list[tuple[Any, Any]]) -> dict:
+    out = dict(pairs)
+    if len(out) != len(pairs):
+        seen: set = set()
+        raise ValueError(f"duplicate map key {next(k for k, _ in pairs if k in seen or seen.add(k))!r}"[:80])
+    return out
+
+
+def unpack_map(payload: bytes, unique_keys: bool = False) -> dict:
+    """Decode a msgpack payload that must be a map; any failure is a ``decode`` error.
+
+    Trailing bytes after the map are an error. ``unique_keys``: a map anywhere in the payload that
+    repeats a key is an error too (requests); otherwise the last value of a repeated key wins (replies)."""
     try:
-        obj = msgpack.unpackb(payload, raw=False, strict_map_key=True)
+        hook = {"object_pairs_hook": _unique_keys} if unique_keys else {}
+        obj = msgpack.unpackb(payload, raw=False, strict_map_key=True, **hook)
     except Exception as exc:  # msgpack raises several unrelated types on garbage
         raise ProtocolError("decode", f"payload is not valid msgpack ({type(exc).__name__}: {exc})"[:200]) from None
     if not isinstance(obj, dict):
@@ -169,6 +181,13 @@ def t_params(v: Any, path: str) -> dict:
     return t_value(v, path)
 
 
+def t_param_decls(v: Any, path: str) -> dict[str, dict]:
+    """A description's declared parameters: name -> {"default": value, "unit": str, "doc": str}."""
+    if not isinstance(v, dict):
+        raise bad(path, "a map of parameter name -> {default, unit, doc}", v)
+    return {t_str(k, f"{path} key"): check_fields(d, PARAM_FIELDS, f"{path}.{k}", strict=False) for k, d in v.items()}
+
+
 def t_any_map(v: Any, path: str) -> dict:
     if not isinstance(v, dict):
         raise bad(path, "a map", v)
@@ -178,6 +197,7 @@ def t_any_map(v: Any, path: str) -> dict:
 Fields = dict[str, tuple[Checker, bool]]  # name -> (checker, required)
 
 PORT_FIELDS: Fields = {"size": (t_int, True), "unit": (t_str, False), "doc": (t_str, False)}
+PARAM_FIELDS: Fields = {"default": (t_value, False), "unit": (t_str, False), "doc": (t_str, False)}
 
 
 def check_fields(obj: Any, fields: Fields, path: str, strict: bool = True) -> dict:

@@ -8,32 +8,39 @@ from typing import Any
 
 import numpy as np
 
-from cosim.subsim import InputFunction, Port, Subsim
+from cosim.subsim import InputFunction, Param, Port, Subsim
 from subsims.integrator.model import integrate_once
 
 
 def _vector(params: Mapping[str, Any], key: str, size: int) -> np.ndarray:
-    v = np.atleast_1d(np.asarray(params.get(key, np.zeros(size)), dtype=float))
+    """``params[key]``: a list of ``size`` numbers, or one number for all of them."""
+    v = np.asarray(params[key], dtype=float)
+    v = np.full(size, v) if v.ndim == 0 else v
     if v.shape != (size,):
         raise ValueError(f"{key} must have {size} entries, got {v.size}")
     return v
 
 
 class Integrator(Subsim):
-    """y' = u. Parameters: ``size`` (default 1), ``y0`` (default zeros), and ``compute_delay``:
+    """y' = u. Parameters in ``params``; ``compute_delay`` is the
     seconds each ``advance`` sleeps, to stand in for an expensive model in benchmarks and fault tests."""
 
     name = "integrator"
     inputs = {"u": Port(1, "", "rate of y")}
     outputs = {"y": Port(1)}
+    params = {
+        "size": Param(1, "", "width of u and y, 1 to 100000"),
+        "y0": Param(0.0, "", "y at the start time: a list of size numbers, or one number for all"),
+        "compute_delay": Param(0.0, "s", "wall-clock seconds each advance sleeps (benchmarks, fault tests)"),
+    }
 
     def initial_state(self, params: Mapping[str, Any]) -> np.ndarray:
-        size = int(params.get("size", 1))
+        size = int(params["size"])
         if not 1 <= size <= 100_000:
             raise ValueError(f"size must be between 1 and 100000, got {size}")
         self.inputs = {"u": Port(size, "", "rate of y")}
         self.outputs = {"y": Port(size)}
-        self.compute_delay = float(params.get("compute_delay", 0.0))
+        self.compute_delay = float(params["compute_delay"])
         return _vector(params, "y0", size)
 
     def advance(self, state: np.ndarray, times: np.ndarray, u: InputFunction):

@@ -7,24 +7,29 @@ from typing import Any
 
 import numpy as np
 
-from cosim.subsim import InputFunction, Port, Subsim
+from cosim.subsim import InputFunction, Param, Port, Subsim
 from subsims.oscillator.model import integrate
 
 
 class Mass(Subsim):
-    """Parameters: ``m`` (1), ``k`` spring to ground (4 pi^2), ``u0``, ``v0`` (0), ``idiv`` RK4 steps per sample (1)."""
+    """One mass on a spring to ground, m u'' = -k u + F, classical RK4 with ``idiv`` steps per sample."""
 
     name = "mass"
     inputs = {"F": Port(1, "N", "force of the coupling spring on this mass")}
     outputs = {"u": Port(1, "m", "displacement"), "v": Port(1, "m/s", "velocity")}
+    params = {
+        "m": Param(1.0, "kg", "mass, > 0"),
+        "k": Param(4 * np.pi**2, "N/m", "stiffness of everything that pulls the mass back to u = 0"),
+        "u0": Param(0.0, "m", "displacement at the start time"),
+        "v0": Param(0.0, "m/s", "velocity at the start time"),
+        "idiv": Param(1, "", "RK4 steps per sample interval, >= 1 (the input F is interpolated at the RK stages)"),
+    }
 
     def initial_state(self, params: Mapping[str, Any]) -> np.ndarray:
-        self.m = float(params.get("m", 1.0))
-        self.k = float(params.get("k", 4 * np.pi**2))
-        self.idiv = int(params.get("idiv", 1))
+        self.m, self.k, self.idiv = float(params["m"]), float(params["k"]), int(params["idiv"])
         if self.m <= 0 or self.idiv < 1:
             raise ValueError(f"need m > 0 and idiv >= 1, got m={self.m}, idiv={self.idiv}")
-        return np.array([float(params.get("u0", 0.0)), float(params.get("v0", 0.0))])
+        return np.array([float(params["u0"]), float(params["v0"])])
 
     def advance(self, state: np.ndarray, times: np.ndarray, u: InputFunction):
         x = integrate(state, times, lambda t: u(t)["F"][0], self.m, self.k, self.idiv)

@@ -1,0 +1,145 @@
+"""Run scenarios from scripts and notebooks: ``cosim.run(...)`` returns the time series as numpy arrays.
+
+    import cosim
+    r = cosim.run("scenarios/satellite/case1.toml", method="distributed", stop=400)
+    r.t                      # (n,) sample times
+    r["orbit.r"]             # (n, 3): an output, "subsim.port"
+    r.diagnostics["stages"]  # (intervals,) stages each interval took
+
+It is the run ``cosim run`` makes (same processes, same coupler, same bits), without the
+command line: the result file is written only when ``output`` is given. See docs/api.md.
+"""
+
+from __future__ import annotations
+
+import tempfile
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from cosim.coupler.relaxation import Interval, RunSummary
+from cosim.results import DIAG_COLUMNS, read_results
+from cosim.runner import run_scenario
+from cosim.scenario import Scenario, ScenarioError, load, parse
+from cosim.unified import run_unified
+
+
+@dataclass
+class Result:
+    """The time series of one run and its per-interval diagnostics."""
+
+    scenario: Scenario
+    method: str
+    t: np.ndarray  # (n,) every sample time, each interval's last sample being the next one's first
+    signals: dict[str, np.ndarray]  # "subsim.port" -> (n, size)
+    diagnostics: dict[str, np.ndarray]  # DIAG_COLUMNS -> (intervals,)
+    summary: RunSummary
+    order: list[str] = field(default_factory=list)
+    feedback: list[str] = field(default_factory=list)
+    output: Path | None = None  # the result file, when one was asked for
+
+    def __getitem__(self, signal: str) -> np.ndarray:
+        try:
+            return self.signals[signal]
+        except KeyError:
+            raise KeyError(f"no signal {signal!r}; signals: {', '.join(self.signals)}") from None
+
+    def column(self, name: str) -> np.ndarray:
+        """One column as the result file names it: ``"time"`` or ``"subsim.port[i]"``."""
+        if name == "time":
+            return self.t
+        signal, _, index = name.rpartition("[")
+        return self[signal][:, int(index.rstrip("]"))]
+
+
+class _Collect:
+    """Gathers the committed intervals as the result writer does: each interval but its last sample."""
+
+    def __init__(self) -> None:
+        self.t: list[np.ndarray] = []
+        self.signals: dict[str, list[np.ndarray]] = {}
+        self.diag: list[tuple] = []
+        self.last: Interval | None = None
+
+    def __call__(self, interval: Interval) -> None:
+        self.t.append(interval.t[:-1])
+        for name, ports in interval.outputs.items():
+            for port, v in ports.items():
+                self.signals.setdefault(f"{name}.{port}", []).append(v[:-1])
+        self.diag.append((len(self.diag) + 1, float(interval.t[0]), float(interval.t[-1]), interval.stages,
+                          interval.largest_residual, interval.wall_time, interval.halvings))
+        self.last = interval
+
+    def arrays(self) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, np.ndarray]]:
+        if self.last is None:
+            return np.empty(0), {}, {c: np.empty(0) for c in DIAG_COLUMNS}
+        last = self.last
+        t = np.concatenate([*self.t, last.t[-1:]])
+        signals = {k: np.concatenate([*v, last.outputs[k.split(".", 1)[0]][k.split(".", 1)[1]][-1:]])
+                   for k, v in self.signals.items()}
+        columns = list(zip(*self.diag))
+        kinds = [int, float, float, int, float, float, int]
+        diag = {c: np.array(col, dtype=kind) for c, col, kind in zip(DIAG_COLUMNS, columns, kinds)}
+        return t, signals, diag
+
+
+def run(
+    scenario: str | Path | Scenario,
+    method: str | None = None,
+    stop: float | None = None,
+    *,
+    params: Mapping[str, Mapping[str, Any]] | None = None,
+    output: str | Path | None = None,
+    inprocess: bool = False,
+    listen: str = "tcp/127.0.0.1:0",
+    run_id: str | None = None,
+    attach_wait: float = 300.0,
+    progress: bool = False,
+) -> Result:
+    """Run a scenario as ``cosim run`` does and return its time series.
+
+    ``scenario``: a file or a loaded :class:`~cosim.scenario.Scenario`. ``method``: ``"centralized"``,
+    ``"distributed"`` or ``"unified"`` (default: the scenario's). ``stop``: overrides the scenario's.
+    ``params``: ``{subsim: {parameter: value}}`` merged over the scenario's (a variant without a new
+    file). ``output``: also write the result file (.csv or .npz) and its diagnostics. The other
+    arguments are those of ``cosim run``. Raises ``ScenarioError``, ``SubsimError``, ``NotConverged``.
+    """
+    sc = scenario if isinstance(scenario, Scenario) else load(scenario)
+    if params:
+        sc = _with_params(sc, params)
+    method = method or sc.default_method
+    with tempfile.TemporaryDirectory(prefix="cosim-run-") as scratch:
+        path = Path(output) if output is not None else Path(scratch) / "results.csv"
+        if method == "unified":
+            report = run_unified(sc, stop=stop, output=path)
+            return _from_file(sc, report, output)
+        collect = _Collect()
+        report = run_scenario(sc, method=method, stop=stop, output=path, inprocess=inprocess, listen=listen,
+                              progress=progress, on_interval=collect, run_id=run_id, attach_wait=attach_wait)
+    t, signals, diag = collect.arrays()
+    return Result(sc, report.method, t, signals, diag, report.summary, report.order, report.feedback,
+                  Path(output) if output is not None else None)
+
+
+def _with_params(sc: Scenario, params: Mapping[str, Mapping[str, Any]]) -> Scenario:
+    raw = {**sc.raw, "subsims": {k: dict(v) for k, v in sc.raw["subsims"].items()}}
+    for name, values in params.items():
+        if name not in raw["subsims"]:
+            raise ScenarioError(f"{sc.path}: params for unknown subsim {name!r}; subsims: {', '.join(sc.subsims)}")
+        raw["subsims"][name]["params"] = {**raw["subsims"][name].get("params", {}), **values}
+    return parse(raw, sc.path)
+
+
+def _from_file(sc: Scenario, report: Any, output: str | Path | None) -> Result:
+    """A unified run writes its file; read it back (CSV floats are written with repr: exact)."""
+    columns, data = read_results(report.output)
+    signals: dict[str, list[np.ndarray]] = {}
+    for i, name in enumerate(columns[1:], start=1):
+        signals.setdefault(name.rpartition("[")[0], []).append(data[:, i])
+    _, diag_rows = read_results(report.diagnostics)
+    diag = {c: diag_rows[:, j] for j, c in enumerate(DIAG_COLUMNS)}
+    return Result(sc, "unified", data[:, 0], {k: np.column_stack(v) for k, v in signals.items()}, diag,
+                  report.summary, report.order, report.feedback, Path(output) if output is not None else None)

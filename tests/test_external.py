@@ -1,0 +1,78 @@
+"""External subsims: a launcher fixes the run id, reads a machine-readable attach line, and the
+subsim it started receives ``shutdown`` when the run ends."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from cosim.results import read_results
+
+ROOT = Path(__file__).parents[1]
+OSCILLATOR = ROOT / "scenarios" / "oscillator.toml"
+COSIM = [sys.executable, "-m", "cosim.cli"]
+
+
+@pytest.fixture
+def procs() -> Iterator[list[subprocess.Popen]]:
+    started: list[subprocess.Popen] = []
+    yield started
+    for p in started:
+        if p.poll() is None:
+            p.kill()
+        p.wait()
+
+
+def external_scenario(tmp_path: Path) -> Path:
+    sc = tmp_path / "ext.toml"
+    text = OSCILLATOR.read_text()
+    head = '[subsims.mass2]\nmodel = "subsims.oscillator.subsim:Mass"'
+    assert head in text
+    sc.write_text(text.replace(head, head + "\nexternal = true"))
+    return sc
+
+
+def test_run_id_attach_line_and_shutdown_of_the_external_subsim(tmp_path: Path, procs: list) -> None:
+    out = tmp_path / "ext.csv"
+    coord = subprocess.Popen([*COSIM, "run", str(external_scenario(tmp_path)), "--stop", "0.1", "--output", str(out),
+                              "--quiet", "--run-id", "launcher-run.1"], stdout=subprocess.PIPE,
+                             stderr=subprocess.PIPE, text=True)
+    procs.append(coord)
+    attach = None
+    for line in coord.stderr:
+        if line.startswith("cosim-attach "):
+            attach = json.loads(line.removeprefix("cosim-attach "))
+            break
+    assert attach is not None, "no attach line"
+    assert attach["run"] == "launcher-run.1" and attach["name"] == "mass2"
+    assert attach["endpoint"].startswith("tcp/127.0.0.1:")
+    command = attach["command"]
+    assert command[:4] == ["python", "-m", "cosim.serve", "subsims.oscillator.subsim:Mass"]
+    user = subprocess.Popen([sys.executable, *command[1:]], stderr=subprocess.PIPE, text=True)
+    procs.append(user)
+    coord.communicate(timeout=120)
+    assert coord.returncode == 0
+    _, err = user.communicate(timeout=30)
+    assert user.returncode == 0
+    assert "mass2: shutdown requested by the coordinator" in err, err
+    _, data = read_results(out)
+    assert data[-1, 0] == pytest.approx(0.1)
+
+
+def test_attach_wait_is_settable_and_a_missing_external_subsim_stops_the_run(tmp_path: Path) -> None:
+    done = subprocess.run([*COSIM, "run", str(external_scenario(tmp_path)), "--quiet", "--attach-wait", "0.5",
+                           "--output", str(tmp_path / "x.csv")], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 1
+    assert "waiting up to 0.5 s for external subsim 'mass2'" in done.stderr
+    assert "mass2.connect: [no_responder] no process appeared within 0.5 s" in done.stderr
+
+
+def test_a_bad_run_id_is_refused_by_the_command_line() -> None:
+    done = subprocess.run([*COSIM, "run", str(OSCILLATOR), "--run-id", "a/b"], capture_output=True, text=True,
+                          timeout=60)
+    assert done.returncode == 2 and "--run-id 'a/b' must be 1-64 characters" in done.stderr

@@ -1,0 +1,77 @@
+"""A scenario finds the user's modules beside it and in the working directory, without PYTHONPATH,
+both when it is loaded and in the subsim processes ``cosim run`` launches."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from cosim.results import read_results
+
+ROOT = Path(__file__).parents[1]
+
+MODEL = '''
+import numpy as np
+from cosim import Port, Subsim
+
+
+class Ramp(Subsim):
+    """y' = 1."""
+    outputs = {"y": Port(1)}
+
+    def initial_state(self, params):
+        return np.zeros(1)
+
+    def advance(self, state, times, u):
+        y = state[0] + (times - times[0])
+        return {"y": y[:, None]}, y[-1:]
+'''
+
+TRANSFORM = '''
+def double(x):
+    return 2.0 * x
+'''
+
+SCENARIO = '''
+stop = 0.5
+[coupling]
+interval = 0.25
+samples = 3
+[subsims.ramp]
+model = "beside_scenario:Ramp"
+[subsims.sink]
+model = "subsims.integrator.subsim:Integrator"
+[[couplings]]
+to = "sink.u"
+from = "ramp.y"
+transform = "in_cwd:double"
+'''
+
+
+@pytest.mark.parametrize("inprocess", [True, False], ids=["inprocess", "launched"])
+def test_modules_beside_the_scenario_and_in_the_working_directory(tmp_path: Path, inprocess: bool) -> None:
+    scenario_dir, work, bin_dir = tmp_path / "scenario", tmp_path / "work", tmp_path / "bin"
+    for d in (scenario_dir, work, bin_dir):
+        d.mkdir()
+    (scenario_dir / "beside_scenario.py").write_text(MODEL)
+    (scenario_dir / "s.toml").write_text(SCENARIO)
+    (work / "in_cwd.py").write_text(TRANSFORM)
+    # like the installed `cosim` script: sys.path[0] is the script's directory, not the working directory
+    script = bin_dir / "cosim_script.py"
+    script.write_text("from cosim.cli import main\nraise SystemExit(main())\n")
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}  # the code under test only, none of the user's directories
+    out = work / "r.csv"
+    cmd = [sys.executable, str(script), "run", str(scenario_dir / "s.toml"), "--output", str(out), "--quiet",
+           *(["--inprocess"] if inprocess else [])]
+    done = subprocess.run(cmd, cwd=work, env=env, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    cols, data = read_results(out)
+    assert cols == ["time", "ramp.y[0]", "sink.y[0]"]
+    t = data[:, 0]
+    assert data[-1, 0] == 0.5
+    assert list(data[:, 1]) == list(t)  # y = t
+    assert abs(data[-1, 2] - 0.25) < 1e-14  # the integral of 2 t from 0 to 0.5

@@ -1,0 +1,92 @@
+"""Declared model parameters: defaults filled in, unknown names refused with a hint, described on the wire."""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+
+from cosim.contract import SubsimError
+from cosim.handles import Description, InProcessHandle
+from cosim.protocol.messages import decode_reply, encode_request
+from cosim.protocol.service import answer
+from cosim.runtime import Runtime
+from cosim.subsim import Param, Port, Subsim
+from subsims.integrator.subsim import Integrator
+from subsims.oscillator.subsim import Mass
+
+
+class Seen(Subsim):
+    """Records the parameters initial_state was given."""
+
+    inputs = {}
+    outputs = {"x": Port(1)}
+    params = {"gain": Param(2.5, "1", "a gain"), "offset": Param(0.0, "m", "an offset")}
+
+    def initial_state(self, params):
+        self.seen = dict(params)
+        return np.zeros(1)
+
+    def advance(self, state, times, u):
+        return {"x": np.zeros((times.size, 1))}, state
+
+
+class Undeclared(Seen):
+    params = {}
+
+
+def test_declared_defaults_are_filled_in_and_given_values_win() -> None:
+    h = InProcessHandle(Seen())
+    h.configure({"offset": 3.0})
+    assert h.runtime.model.seen == {"gain": 2.5, "offset": 3.0}
+
+
+def test_unknown_parameter_is_refused_with_the_known_ones_and_a_close_match() -> None:
+    h = InProcessHandle(Seen())
+    h.configure({"gain": 1.0})
+    with pytest.raises(SubsimError) as err:
+        h.configure({"gian": 1.0, "zzz": 2})
+    msg = err.value.message
+    assert err.value.code == "bad_value" and err.value.command == "configure"
+    assert "'gian' (did you mean 'gain'?)" in msg and "'zzz'" in msg and "did you mean" not in msg.split("'zzz'")[1]
+    assert "gain, offset" in msg
+    assert h.runtime.model.seen == {"gain": 1.0, "offset": 0.0}  # the old configuration stays
+
+
+def test_a_model_without_declarations_takes_any_names_as_given() -> None:
+    h = InProcessHandle(Undeclared())
+    h.configure({"anything": 1})
+    assert h.runtime.model.seen == {"anything": 1}
+
+
+def test_describe_carries_the_declarations_over_the_wire() -> None:
+    rt = Runtime(Mass)
+    result = decode_reply("describe", answer(rt, encode_request("describe")))
+    d = Description.from_result(result)
+    assert d.params["m"] == Param(1.0, "kg", "mass, > 0")
+    assert d.params["k"].default == 4 * np.pi**2 and d.params["idiv"].default == 1
+    assert list(d.params) == ["m", "k", "u0", "v0", "idiv"]
+
+
+@pytest.mark.parametrize(("model", "typo", "hint"), [(Mass, "u_0", "u0"), (Integrator, "sise", "size")])
+def test_shipped_models_refuse_typos(model: type[Subsim], typo: str, hint: str) -> None:
+    with pytest.raises(SubsimError) as err:
+        InProcessHandle(model()).configure({typo: 1.0})
+    assert f"did you mean {hint!r}" in err.value.message
+
+
+def test_a_scenario_typo_is_reported_as_the_scenario_page_says(tmp_path) -> None:
+    from pathlib import Path
+
+    from cosim.runner import open_session
+    from cosim.scenario import ScenarioError, load
+
+    root = Path(__file__).parents[1]
+    shown = re.search(r"suggesting the closest one: `oscillator.toml: (.*?)`", (root / "docs" / "scenarios.md")
+                      .read_text(), re.S).group(1).replace("\n  ", " ")
+    sc = tmp_path / "oscillator.toml"
+    sc.write_text((root / "scenarios" / "oscillator.toml").read_text().replace("u0 = 1.0", "u_0 = 1.0"))
+    with pytest.raises(ScenarioError) as err:
+        open_session(load(sc), inprocess=True).close()
+    assert str(err.value) == f"{sc}: {shown}"

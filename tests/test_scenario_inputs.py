@@ -1,0 +1,75 @@
+"""Inputs no coupling feeds: refused when the run starts unless [subsims.<name>.inputs] holds them constant."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cosim.results import read_results
+from cosim.runner import open_session, run_scenario
+from cosim.scenario import ScenarioError, load
+
+# y' = u: with u held at c, y(t) = c t (Gauss quadrature, exact up to rounding)
+SCENARIO = """
+stop = 1.0
+[coupling]
+interval = 0.5
+samples = 3
+[subsims.a]
+model = "subsims.integrator.subsim:Integrator"
+params = { size = 2 }
+[subsims.a.inputs]
+u = [3.0, -0.5]
+[subsims.b]
+model = "subsims.integrator.subsim:Integrator"
+[[couplings]]
+to = "b.u"
+from = "a.y"
+transform = "linear"
+params = { gains = [[[1.0, 0.0]]] }
+"""
+
+
+def write(tmp_path: Path, text: str) -> Path:
+    p = tmp_path / "held.toml"
+    p.write_text(text)
+    return p
+
+
+@pytest.mark.parametrize("method", ["centralized", "distributed"])
+def test_held_input_feeds_its_constant(tmp_path: Path, method: str) -> None:
+    out = tmp_path / f"{method}.csv"
+    run_scenario(load(write(tmp_path, SCENARIO)), method=method, output=out, inprocess=True, progress=False)
+    cols, data = read_results(out)
+    t = data[:, 0]
+    assert cols[1:3] == ["a.y[0]", "a.y[1]"]
+    np.testing.assert_allclose(data[:, 1], 3.0 * t, rtol=1e-15)
+    np.testing.assert_allclose(data[:, 2], -0.5 * t, rtol=1e-15)
+    np.testing.assert_allclose(data[:, 3], 1.5 * t**2, rtol=1e-14)  # b.y = integral of 3 t
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "words"),
+    [
+        ("[subsims.a.inputs]\nu = [3.0, -0.5]\n", "", "[subsims.a.inputs] input a.u (2 x unitless) is fed by no"),
+        ("u = [3.0, -0.5]", "u = [3.0]", "[subsims.a.inputs.u] a.u takes 2 values, got 1"),
+        ("u = [3.0, -0.5]", "u = [3.0, -0.5]\nv = 1.0", "[subsims.a.inputs.v] a.v is no input (inputs: u)"),
+        ("[subsims.b]\n", "[subsims.b]\ninputs = { u = 1.0 }\n", "[subsims.b.inputs.u] b.u is fed by a coupling"),
+    ],
+)
+def test_unfed_or_wrongly_held_inputs_are_refused_naming_the_key(tmp_path: Path, old: str, new: str,
+                                                                 words: str) -> None:
+    assert old in SCENARIO
+    scenario = load(write(tmp_path, SCENARIO.replace(old, new, 1)))
+    with pytest.raises(ScenarioError) as err:
+        open_session(scenario, inprocess=True).close()
+    assert words in str(err.value) and "held.toml" in str(err.value)
+
+
+@pytest.mark.parametrize("value", ['"x"', "[]", "[1.0, true]", "{ a = 1 }"])
+def test_held_values_must_be_numbers(tmp_path: Path, value: str) -> None:
+    with pytest.raises(ScenarioError) as err:
+        load(write(tmp_path, SCENARIO.replace("u = [3.0, -0.5]", f"u = {value}")))
+    assert "[subsims.a.inputs.u] must be a number or a list of numbers" in str(err.value)
