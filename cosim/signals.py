@@ -138,10 +138,13 @@ def _linear(times: np.ndarray, values: np.ndarray) -> Interpolant:
         # exact at both ends of the step (w = 0 or 1), and no overflow of values[i + 1] - values[i]
         return (1.0 - w) * values[i] + w * values[i + 1]
 
+    inner, lo, step = times[1:-1], times[:-1], times[1:] - times[:-1]
+    v_lo, v_hi = values[:-1], values[1:]
+
     def batch(ts: np.ndarray) -> np.ndarray:
-        i = np.clip(np.searchsorted(times, ts, side="right") - 1, 0, n - 2)  # bisect_right, per time
-        w = ((ts - times[i]) / (times[i + 1] - times[i]))[:, None]
-        return (1.0 - w) * values[i] + w * values[i + 1]
+        i = np.searchsorted(inner, ts, side="right")  # = the scalar's clipped bisect_right(grid, t) - 1
+        w = ((ts - lo[i]) / step[i])[:, None]
+        return (1.0 - w) * v_lo[i] + w * v_hi[i]
 
     return _vectorized(at, batch)
 
@@ -217,9 +220,8 @@ def _cubic(times: np.ndarray, values: np.ndarray) -> Interpolant:
         i = min(max(bisect.bisect_right(grid, t) - 1, 0), n - 2)
         return pieces[min(max(i - 1, 0), n - 4)](t)
 
-    def batch(ts: np.ndarray) -> np.ndarray:
-        i = np.clip(np.searchsorted(times, ts, side="right") - 1, 0, n - 2)
-        return _barycentric_batch(ts, x, w, vals, np.clip(i - 1, 0, n - 4))
+    def batch(ts: np.ndarray) -> np.ndarray:  # piece min(max(i - 1, 0), n - 4) of step i, as the scalar picks
+        return _barycentric_batch(ts, x, w, vals, np.searchsorted(times[2:-2], ts, side="right"))
 
     return _vectorized(at, batch)
 

@@ -7,9 +7,11 @@ from typing import Any
 
 import numpy as np
 
-from cosim.subsim import InputFunction, Port, Subsim
+from cosim.subsim import InputFunction, ModelError, Port, Subsim
 from subsims.attitude.model import AttitudeParams, integrate
-from subsims.satellite.numerics import input_reader
+from subsims.numerics import PhysicsError, input_rows
+
+INPUTS = (("R", 3), ("torque", 3))
 
 
 class Attitude(Subsim):
@@ -38,7 +40,10 @@ class Attitude(Subsim):
     def advance(
         self, state: np.ndarray, times: np.ndarray, u: InputFunction
     ) -> tuple[dict[str, np.ndarray], np.ndarray]:
-        samples, rates, end = integrate(self.p, state.tolist(), np.asarray(times, dtype=np.float64).tolist(),
-                                        input_reader(u, "R", "torque"))
+        try:
+            samples, rates, end = integrate(self.p, state.tolist(), times,
+                                            lambda ts: input_rows(u, ts, INPUTS, lists=True))
+        except PhysicsError as exc:
+            raise ModelError(str(exc)) from exc
         outputs = {"phi": samples[:, 0:3].copy(), "omega": samples[:, 3:6].copy(), "omega_dot": rates}
         return outputs, np.array(end, dtype=np.float64)

@@ -7,9 +7,9 @@ from typing import Any
 
 import numpy as np
 
-from cosim.subsim import InputFunction, Port, Subsim
+from cosim.subsim import InputFunction, ModelError, Port, Subsim
+from subsims.numerics import PhysicsError
 from subsims.orbit.model import OrbitParams, integrate
-from subsims.satellite.numerics import input_reader
 
 
 class Orbit(Subsim):
@@ -34,7 +34,8 @@ class Orbit(Subsim):
     def advance(
         self, state: np.ndarray, times: np.ndarray, u: InputFunction
     ) -> tuple[dict[str, np.ndarray], np.ndarray]:
-        read = input_reader(u, "f_aero")
-        samples, end = integrate(self.p, state.tolist(), np.asarray(times, dtype=np.float64).tolist(),
-                                 lambda t: read(t)[0])
+        try:
+            samples, end = integrate(self.p, state.tolist(), times, lambda ts: u(ts)["f_aero"])
+        except PhysicsError as exc:
+            raise ModelError(str(exc)) from exc
         return {"R": samples[:, 0:3].copy(), "V": samples[:, 3:6].copy()}, np.array(end, dtype=np.float64)
