@@ -87,7 +87,7 @@ def _rksys_array(y: np.ndarray, k1: np.ndarray, k2: np.ndarray, k3: np.ndarray, 
 def rk4(f: Derivative, y0: State, times: Sequence[float] | np.ndarray, steps: int | np.ndarray = 1,
         inputs: Callable[[np.ndarray], Sequence[Any]] | None = None, *, h: float | None = None,
         node: Node | None = None, finish: Callable[[State], State] | None = None,
-        end_node: bool = False) -> tuple[list[State], list[Any], State]:
+        end_node: bool = False, euler: bool = False) -> tuple[list[State], list[Any], State]:
     """Classical RK4 (RKSYS operation order) from ``y0`` at ``times[0]`` over the sample ``times``.
 
     ``f(t, y, row)``: the derivative, ``row`` the input at t (``None`` without ``inputs``). ``inputs(ts)`` is
@@ -95,7 +95,8 @@ def rk4(f: Derivative, y0: State, times: Sequence[float] | np.ndarray, steps: in
     ``node(t, y, row) -> (dy/dt, keep)``: the evaluation at sub-step starts (default ``f``, keeping dy/dt);
     ``keep`` is collected at the sample times (at the last one too with ``end_node``). ``finish(y)``: applied
     to the state after every sub-step (e.g. renormalising a quaternion). ``y0`` a list of floats or an array:
-    the states keep its kind. Returns (states at the samples, the kept values, the state at ``times[-1]``).
+    the states keep its kind. ``euler``: forward Euler steps instead (y + h f at the sub-step starts; for
+    comparisons). Returns (states at the samples, the kept values, the state at ``times[-1]``).
     """
     ts, hs = rk4_times(times, steps, h)
     tl, hl = ts.tolist(), hs.tolist()
@@ -110,13 +111,17 @@ def rk4(f: Derivative, y0: State, times: Sequence[float] | np.ndarray, steps: in
     for count in counts:
         for _ in range(count):
             hj = hl[i // 2]
-            h2 = hj / 2.0
-            tm, rm = tl[i + 1], rows[i + 1]
-            k2 = f(tm, axpy(y, k1, h2), rm)  # RKSYS: Y = YSTART + F*H2, ..., + F*H
-            k3 = f(tm, axpy(y, k2, h2), rm)
-            i += 2
-            k4 = f(tl[i], axpy(y, k3, hj), rows[i])
-            y = rksys(y, k1, k2, k3, k4, hj / 3.0, hj / 6.0)  # YTEMP: YSTART + F1*H6 + F2*H3 + F3*H3 + F4*H6
+            if euler:
+                i += 2
+                y = axpy(y, k1, hj)
+            else:
+                h2 = hj / 2.0
+                tm, rm = tl[i + 1], rows[i + 1]
+                k2 = f(tm, axpy(y, k1, h2), rm)  # RKSYS: Y = YSTART + F*H2, ..., + F*H
+                k3 = f(tm, axpy(y, k2, h2), rm)
+                i += 2
+                k4 = f(tl[i], axpy(y, k3, hj), rows[i])
+                y = rksys(y, k1, k2, k3, k4, hj / 3.0, hj / 6.0)  # YTEMP: YSTART + F1*H6 + F2*H3 + F3*H3 + F4*H6
             if finish is not None:
                 y = finish(y)
             if i < last or end_node:
@@ -190,7 +195,13 @@ def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
         a0, a1, a2 = float(a[0]), float(a[1]), float(a[2])
         b0, b1, b2 = float(b[0]), float(b[1]), float(b[2])
         return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
-    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    if a.shape == b.shape or a.ndim < b.ndim:
+        shape = b.shape if a.ndim < b.ndim or a.shape == b.shape else a.shape
+    elif b.ndim < a.ndim:
+        shape = a.shape
+    else:
+        shape = np.broadcast_shapes(a.shape, b.shape)
+    out = np.empty(shape)
     out[..., 0] = a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]
     out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
     out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]

@@ -20,28 +20,37 @@ def gauss_nodes(n_samples: int) -> tuple[np.ndarray, np.ndarray]:
     return 0.5 * (x + 1.0), 0.5 * w
 
 
-def integrate_once(f: Callable[[float], np.ndarray], times: np.ndarray, y0: np.ndarray) -> np.ndarray:
-    """y(t_i) = y0 + integral of f from t_0 to t_i, at every sample time (y' = u)."""
+def _node_values(f: Callable[[np.ndarray], np.ndarray], times: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """f at every step's nodes t_i + h_i x_k, in ONE call: (n-1, p, size)."""
+    h = times[1:] - times[:-1]
+    ts = times[:-1, None] + h[:, None] * x[None, :]
+    return np.asarray(f(ts.ravel()), dtype=np.float64).reshape(ts.shape + (-1,))
+
+
+def integrate_once(f: Callable[[np.ndarray], np.ndarray], times: np.ndarray, y0: np.ndarray) -> np.ndarray:
+    """y(t_i) = y0 + integral of f from t_0 to t_i, at every sample time (y' = u); ``f(ts)`` -> (k, size)."""
     x, w = gauss_nodes(times.size)
+    fs = _node_values(f, times, x)
     y = np.empty((times.size, y0.size))
     y[0] = y0
     for i in range(times.size - 1):
-        a, h = times[i], times[i + 1] - times[i]
-        y[i + 1] = y[i] + h * sum(wk * f(a + h * xk) for xk, wk in zip(x, w))
+        h = times[i + 1] - times[i]
+        y[i + 1] = y[i] + h * sum(wk * fk for wk, fk in zip(w, fs[i]))
     return y
 
 
 def integrate_twice(
-    f: Callable[[float], np.ndarray], times: np.ndarray, y0: np.ndarray, v0: np.ndarray
+    f: Callable[[np.ndarray], np.ndarray], times: np.ndarray, y0: np.ndarray, v0: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """y'' = u: v = v0 + int u, y = y0 + v0 (t - t0) + int (t - s) u(s) ds, per step."""
+    """y'' = u: v = v0 + int u, y = y0 + v0 (t - t0) + int (t - s) u(s) ds, per step; ``f(ts)`` -> (k, size)."""
     x, w = gauss_nodes(times.size + 1)
+    fs_all = _node_values(f, times, x)
     y = np.empty((times.size, y0.size))
     v = np.empty_like(y)
     y[0], v[0] = y0, v0
     for i in range(times.size - 1):
-        a, h = times[i], times[i + 1] - times[i]
-        fs = [f(a + h * xk) for xk in x]
+        h = times[i + 1] - times[i]
+        fs = fs_all[i]
         v[i + 1] = v[i] + h * sum(wk * fk for wk, fk in zip(w, fs))
         y[i + 1] = y[i] + h * v[i] + h * h * sum(wk * (1.0 - xk) * fk for xk, wk, fk in zip(x, w, fs))
     return y, v
