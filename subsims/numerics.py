@@ -17,7 +17,7 @@ than NumPy (the paper's 60,000 s runs make millions of derivative calls), for la
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -145,12 +145,14 @@ def as_table(value: Any, k: int, size: int, what: str = "input") -> np.ndarray:
     return np.broadcast_to(v, (k, size))
 
 
-def input_rows(u: Callable[[np.ndarray], Any], ts: np.ndarray, ports: Sequence[tuple[str, int]],
+def input_rows(u: Callable[[np.ndarray], Any], ts: np.ndarray, ports: Mapping[str, Any],
                lists: bool = False) -> list[tuple[Any, ...]]:
-    """``u(ts)`` (one call) row by row: per time of ``ts`` a tuple with the value of each (name, size) in
-    ``ports``, a (size,) array or, with ``lists``, a list of floats (for models computing on Python floats)."""
+    """``u(ts)`` (one call) row by row: per time of ``ts`` a tuple with the value of each input of ``ports``
+    (name -> size, or anything with a ``size``), a (size,) array or, with ``lists``, a list of floats (for
+    models computing on Python floats)."""
     values = u(ts)
-    tables = [as_table(values[name], ts.size, size, f"input {name!r}") for name, size in ports]
+    tables = [as_table(values[name], ts.size, getattr(size, "size", size), f"input {name!r}")
+              for name, size in ports.items()]
     return list(zip(*(tab.tolist() for tab in tables))) if lists else list(zip(*tables))
 
 

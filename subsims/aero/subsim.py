@@ -39,6 +39,6 @@ class Aero(Subsim):
         self, state: np.ndarray, times: np.ndarray, u: InputFunction
     ) -> tuple[dict[str, np.ndarray], np.ndarray]:
         times = np.asarray(times, dtype=np.float64)
-        loads = [aero_loads(v, self.p, self.facets) for v, in input_rows(u, times, (("V_body", 3),), lists=True)]
+        loads = [aero_loads(v, self.p, self.facets) for v, in input_rows(u, times, {"V_body": 3}, lists=True)]
         force, torque = (np.array(x, dtype=np.float64).reshape(-1, 3) for x in zip(*loads))
         return {"force": force, "torque": torque}, np.empty(0, dtype=np.float64)

@@ -41,7 +41,7 @@ class AttitudeControl(Subsim):
         self, state: np.ndarray, times: np.ndarray, u: InputFunction
     ) -> tuple[Mapping[str, np.ndarray], np.ndarray]:
         times = np.asarray(times, dtype=np.float64)
-        rows = input_rows(u, times, (("euler123", 3), ("omega", 3)))  # one call for all the samples
+        rows = input_rows(u, times, self.inputs)  # one call for all the samples
         last = times.size - 1
         tau = np.array([control_torque(self.p, tt, euler, omega, left=k == last and k > 0)
                         for k, (tt, (euler, omega)) in enumerate(zip(times.tolist(), rows))]).reshape(-1, 3)

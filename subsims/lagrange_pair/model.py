@@ -133,11 +133,11 @@ class PairModel:
     aero: bool = True
     gravity: bool = True
     formulation: str = "stabilized"
-    M: np.ndarray = field(init=False)
-    MINV: np.ndarray = field(init=False)
-    lt_b: np.ndarray = field(init=False)
-    lt_c: np.ndarray = field(init=False)
-    a_34: np.ndarray = field(init=False)
+    M: np.ndarray = field(init=False, repr=False)  # derived matrices: built once, too big to print
+    MINV: np.ndarray = field(init=False, repr=False)
+    lt_b: np.ndarray = field(init=False, repr=False)
+    lt_c: np.ndarray = field(init=False, repr=False)
+    a_34: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         if self.formulation not in FORMULATIONS:

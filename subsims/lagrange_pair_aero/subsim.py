@@ -48,7 +48,7 @@ class LagrangePairAero(Subsim):
         self, state: np.ndarray, times: np.ndarray, u: InputFunction
     ) -> tuple[Mapping[str, np.ndarray], np.ndarray]:
         out = {name: np.empty((len(times), 3)) for name in OUTPUT_PORTS}
-        rows = input_rows(u, np.asarray(times, dtype=np.float64), tuple((k, p.size) for k, p in INPUT_PORTS.items()))
+        rows = input_rows(u, np.asarray(times, dtype=np.float64), INPUT_PORTS)
         for k, (pos_b, vel_b, vel_c) in enumerate(rows):  # one call of u for all the samples
             loads = pair_aero_loads(-float(pos_b[2]), vel_b, vel_c)
             for name, value in zip(OUTPUT_PORTS, loads, strict=True):
