@@ -106,7 +106,7 @@ def rk4(f: Derivative, y0: State, times: Sequence[float] | np.ndarray, steps: in
     y = list(y0) if lists else np.array(y0, dtype=np.float64)
     k1, kept = node(tl[0], y, rows[0]) if node is not None else (f(tl[0], y, rows[0]),) * 2
     states, keeps = [y], [kept]
-    counts = np.broadcast_to(np.asarray(steps, dtype=np.intp), (len(times) - 1,)).tolist()
+    counts = [steps] * (len(times) - 1) if isinstance(steps, int) else np.asarray(steps, dtype=np.intp).tolist()
     i, last = 0, 2 * len(hl)
     for count in counts:
         for _ in range(count):
@@ -135,13 +135,14 @@ def rk4(f: Derivative, y0: State, times: Sequence[float] | np.ndarray, steps: in
     return states, keeps, y
 
 
-def as_table(value: Any, k: int, size: int, what: str = "input") -> np.ndarray:
+def as_table(value: Any, k: int, size: int, name: str = "") -> np.ndarray:
     """``value`` as a (k, size) float array; a (size,) value is a constant and stands for all k times."""
     v = np.asarray(value, dtype=np.float64)
     if v.shape == (k, size):
         return v
     if v.shape != (size,):
-        raise ValueError(f"{what}: {k} times gave shape {v.shape}, expected ({k}, {size}) (or ({size},) if constant)")
+        raise ValueError(f"input {name!r}: {k} times gave shape {v.shape}, expected ({k}, {size}) "
+                         f"(or ({size},) if constant)")
     return np.broadcast_to(v, (k, size))
 
 
@@ -151,8 +152,7 @@ def input_rows(u: Callable[[np.ndarray], Any], ts: np.ndarray, ports: Mapping[st
     (name -> size, or anything with a ``size``), a (size,) array or, with ``lists``, a list of floats (for
     models computing on Python floats)."""
     values = u(ts)
-    tables = [as_table(values[name], ts.size, getattr(size, "size", size), f"input {name!r}")
-              for name, size in ports.items()]
+    tables = [as_table(values[name], ts.size, getattr(size, "size", size), name) for name, size in ports.items()]
     return list(zip(*(tab.tolist() for tab in tables))) if lists else list(zip(*tables))
 
 
@@ -237,5 +237,8 @@ def dcm321(phi: Vec) -> tuple[tuple[float, float, float], ...]:
 def dcm321_batch(phi: np.ndarray) -> np.ndarray:
     """Eq. 15 vectorised: phi (n, 3) -> A (n, 3, 3)."""
     phi = np.asarray(phi, dtype=np.float64).reshape(-1, 3)
-    rows = rotation321(np.sin(phi).T, np.cos(phi).T)
-    return np.moveaxis(np.array(rows), 2, 0)
+    a = np.empty((phi.shape[0], 3, 3))
+    for i, row in enumerate(rotation321(np.sin(phi).T, np.cos(phi).T)):
+        for j, column in enumerate(row):
+            a[:, i, j] = column
+    return a

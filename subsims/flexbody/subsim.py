@@ -135,7 +135,7 @@ class FlexBody(Subsim):
     def _inputs(self, u: InputFunction, ts: np.ndarray) -> list[dict[str, np.ndarray]]:
         """The inputs at all the times ``ts`` from ONE call of ``u``, per time a dict (missing inputs: zero)."""
         values = u(ts)
-        tables = {name: as_table(values.get(name, np.zeros(port.size)), ts.size, port.size, f"input {name!r}")
+        tables = {name: as_table(values.get(name, np.zeros(port.size)), ts.size, port.size, name)
                   for name, port in self.inputs.items()}
         tables["fp"] = tables["fp"].reshape(ts.size, self.model.n, 3)
         names = tuple(tables)

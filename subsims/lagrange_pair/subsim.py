@@ -75,7 +75,7 @@ class LagrangePair(Subsim):
         def loads(ts: np.ndarray) -> np.ndarray:
             """The extra loads (k, 12) at all the RK times ``ts``, from one call of ``u``."""
             values = u(ts)
-            fx = np.hstack([as_table(values[k], ts.size, 3, f"input {k!r}") for k in INPUT_PORTS])
+            fx = np.hstack([as_table(values[k], ts.size, 3, k) for k in INPUT_PORTS])
             if not np.all(np.isfinite(fx)):
                 i = int(np.argmin(np.isfinite(fx).all(axis=1)))
                 raise FloatingPointError(f"extra loads at t={float(ts[i])!r} are not finite: {fx[i].tolist()}")
