@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 
 from subsims.lagrange_pair import aero
-from subsims.numerics import cross, rk4, substeps
+from subsims.numerics import cross, dcm321, rk4, substeps
 
 GZERO = 32.1740485  # ft/s^2, listing constant
 DEG = 1.0 / aero.RAD2DEG  # rad per deg (1/CNV)
@@ -91,17 +91,8 @@ def inertia_matrix(
 
 
 def dcm_321(psi: float, theta: float, phi: float) -> np.ndarray:
-    """I -> body matrix of a 3-2-1 Euler sequence (listing, parachute initialization)."""
-    s3, c3 = math.sin(psi), math.cos(psi)
-    s2, c2 = math.sin(theta), math.cos(theta)
-    s1, c1 = math.sin(phi), math.cos(phi)
-    return np.array(
-        [
-            [c2 * c3, c2 * s3, -s2],
-            [s1 * s2 * c3 - c1 * s3, s1 * s2 * s3 + c1 * c3, s1 * c2],
-            [c1 * s2 * c3 + s1 * s3, c1 * s2 * s3 - s1 * c3, c1 * c2],
-        ]
-    )
+    """I -> body matrix of a 3-2-1 Euler sequence (listing, parachute initialization): the one 3-2-1 DCM."""
+    return np.array(dcm321((phi, theta, psi)))
 
 
 def euler_321(a: np.ndarray) -> np.ndarray:
