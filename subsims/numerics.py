@@ -106,7 +106,8 @@ def rk4(f: Derivative, y0: State, times: Sequence[float] | np.ndarray, steps: in
     y = list(y0) if lists else np.array(y0, dtype=np.float64)
     k1, kept = node(tl[0], y, rows[0]) if node is not None else (f(tl[0], y, rows[0]),) * 2
     states, keeps = [y], [kept]
-    counts = [steps] * (len(times) - 1) if isinstance(steps, int) else np.asarray(steps, dtype=np.intp).tolist()
+    counts = np.broadcast_to(np.asarray(steps, dtype=np.intp), (len(times) - 1,)).tolist() if np.ndim(steps) else \
+        [int(steps)] * (len(times) - 1)
     i, last = 0, 2 * len(hl)
     for count in counts:
         for _ in range(count):
