@@ -143,8 +143,9 @@ def _linear(times: np.ndarray, values: np.ndarray) -> Interpolant:
         return (1.0 - w) * values[i] + w * values[i + 1]
 
     def batch(ts: np.ndarray) -> np.ndarray:
-        i = np.clip(np.searchsorted(times, ts, side="right") - 1, 0, n - 2)  # bisect_right, per time
-        w = ((ts - times[i]) / (times[i + 1] - times[i]))[:, None]
+        i = np.searchsorted(times[1:-1], ts, side="right")  # = the scalar's clipped bisect_right(grid, t) - 1
+        lo = times[i]
+        w = ((ts - lo) / (times[i + 1] - lo))[:, None]
         return (1.0 - w) * values[i] + w * values[i + 1]
 
     return _vectorized(at, batch)
@@ -221,9 +222,8 @@ def _cubic(times: np.ndarray, values: np.ndarray) -> Interpolant:
         i = min(max(bisect.bisect_right(grid, t) - 1, 0), n - 2)
         return pieces[min(max(i - 1, 0), n - 4)](t)
 
-    def batch(ts: np.ndarray) -> np.ndarray:
-        i = np.clip(np.searchsorted(times, ts, side="right") - 1, 0, n - 2)
-        return _barycentric_batch(ts, x, w, vals, np.clip(i - 1, 0, n - 4))
+    def batch(ts: np.ndarray) -> np.ndarray:  # piece min(max(i - 1, 0), n - 4) of step i, as the scalar picks
+        return _barycentric_batch(ts, x, w, vals, np.searchsorted(times[2:-2], ts, side="right"))
 
     return _vectorized(at, batch)
 

@@ -11,8 +11,9 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from subsims.numerics import Vec, cross3, vecnorm
 from subsims.satellite import constants as C
-from subsims.satellite.numerics import Vec, as_float, cross, vecnorm
+from subsims.satellite.parameters import as_float
 
 PARAM_NAMES = ("rho", "cd", "length", "width", "height")
 
@@ -73,7 +74,7 @@ def facet_loads(vnorm_b: Vec, vmag: float, rho: float, cd: float,
         drag = fac * aproj
         facefor = (-drag * vnorm_b[0], -drag * vnorm_b[1], -drag * vnorm_b[2])  # eq. 18
         fx, fy, fz = fx + facefor[0], fy + facefor[1], fz + facefor[2]  # eq. 19
-        facetor = cross(cp, facefor)  # eq. 20
+        facetor = cross3(cp, facefor)  # eq. 20
         tx, ty, tz = tx + facetor[0], ty + facetor[1], tz + facetor[2]
     return (fx, fy, fz), (tx, ty, tz)
 
@@ -87,14 +88,14 @@ def aero_loads(vel_b: Vec, p: AeroParams, facets: tuple[Facet, ...] | None = Non
     return facet_loads(vnorm_b, vmag, p.rho, p.cd, p.facets if facets is None else facets)
 
 
-def torque_about_cm(torque_g: Vec, force: Vec, r_cm: Vec = C.R_CM,
-                    physical: bool = False) -> tuple[float, float, float]:
+def torque_about_cm(torque_g: Vec, force: Vec, r_cm: Vec = C.R_CM, physical: bool = False) -> tuple[Any, Any, Any]:
     """Aero torque about the c.m. from the torque about the geometric origin and the force there.
 
     ``physical=False``: the listings' T + r_cm x F (coupler, coupler3, sub). ``physical=True``: eq. 21,
     T - r_cm x F, the correct moment about the c.m. of a force acting at the geometric origin.
+    By components: each a float, or an array (a column of samples; ``transforms.torque_to_cm``).
     """
-    rxf = cross(r_cm, force)
+    rxf = cross3(r_cm, force)
     if physical:
         return torque_g[0] - rxf[0], torque_g[1] - rxf[1], torque_g[2] - rxf[2]
     return torque_g[0] + rxf[0], torque_g[1] + rxf[1], torque_g[2] + rxf[2]

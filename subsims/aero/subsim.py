@@ -9,6 +9,7 @@ import numpy as np
 
 from cosim.subsim import InputFunction, Port, Subsim
 from subsims.aero.model import AeroParams, aero_loads
+from subsims.numerics import input_rows
 
 
 class Aero(Subsim):
@@ -37,10 +38,7 @@ class Aero(Subsim):
     def advance(
         self, state: np.ndarray, times: np.ndarray, u: InputFunction
     ) -> tuple[dict[str, np.ndarray], np.ndarray]:
-        n = len(times)
-        force = np.empty((n, 3))
-        torque = np.empty((n, 3))
-        for j, t in enumerate(np.asarray(times, dtype=np.float64).tolist()):
-            vel_b = np.asarray(u(t)["V_body"], dtype=np.float64).tolist()
-            force[j], torque[j] = aero_loads(vel_b, self.p, self.facets)
+        times = np.asarray(times, dtype=np.float64)
+        loads = [aero_loads(v, self.p, self.facets) for v, in input_rows(u, times, {"V_body": 3}, lists=True)]
+        force, torque = (np.array(x, dtype=np.float64).reshape(-1, 3) for x in zip(*loads))
         return {"force": force, "torque": torque}, np.empty(0, dtype=np.float64)

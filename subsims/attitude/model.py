@@ -14,42 +14,24 @@ from typing import Any
 
 import numpy as np
 
-from cosim.subsim import ModelError
+from subsims import numerics
+from subsims.numerics import Mat, PhysicsError, Vec, cross3, matvec, rk4, rotation321, vecnorm
 from subsims.satellite import constants as C
-from subsims.satellite.numerics import Mat, Vec, as_float, as_int, as_vec3, cross, matvec, rk4_step, vecnorm
+from subsims.satellite.parameters import as_float, as_int, as_vec3
 
 GAIN_NAMES = ("a0", "a1", "b0", "b1", "c0", "c1")
 PARAM_NAMES = ("inertia", "mu", "idiv", "phi0", "omega0", "min_cos_phi_y", *GAIN_NAMES)
 MIN_COS_PHI_Y = 1e-6  # cos phi_y below this (phi_y within ~6e-5 deg of, or beyond, +-90 deg): EulerSingularityError
 
 
-class EulerSingularityError(ModelError):
+dcm321, dcm321_batch = numerics.dcm321, numerics.dcm321_batch  # eq. 15, kept where the attitude's users look
+
+
+class EulerSingularityError(PhysicsError):
     """The 3-2-1 Euler-rate kinematics (eq. 14) is singular at phi_y = +-90 deg."""
 
 
 # --- kinematics ---------------------------------------------------------------------------------------
-
-
-def dcm321(phi: Vec) -> tuple[tuple[float, float, float], ...]:
-    """dcm321, eq. 15: A = R1(phi_x) R2(phi_y) R3(phi_z), inertial -> body (v_b = A v_i), as rows."""
-    s1, c1 = math.sin(phi[0]), math.cos(phi[0])
-    s2, c2 = math.sin(phi[1]), math.cos(phi[1])
-    s3, c3 = math.sin(phi[2]), math.cos(phi[2])
-    return ((c2 * c3, c2 * s3, -s2),
-            (s1 * s2 * c3 - c1 * s3, s1 * s2 * s3 + c1 * c3, s1 * c2),
-            (c1 * s2 * c3 + s1 * s3, c1 * s2 * s3 - s1 * c3, c1 * c2))
-
-
-def dcm321_batch(phi: np.ndarray) -> np.ndarray:
-    """Vectorised eq. 15: phi (n, 3) -> A (n, 3, 3), inertial -> body."""
-    phi = np.asarray(phi, dtype=np.float64).reshape(-1, 3)
-    s1, s2, s3 = np.sin(phi).T
-    c1, c2, c3 = np.cos(phi).T
-    a = np.empty((phi.shape[0], 3, 3))
-    a[:, 0, 0], a[:, 0, 1], a[:, 0, 2] = c2 * c3, c2 * s3, -s2
-    a[:, 1, 0], a[:, 1, 1], a[:, 1, 2] = s1 * s2 * c3 - c1 * s3, s1 * s2 * s3 + c1 * c3, s1 * c2
-    a[:, 2, 0], a[:, 2, 1], a[:, 2, 2] = c1 * s2 * c3 + s1 * s3, c1 * s2 * s3 - s1 * c3, c1 * c2
-    return a
 
 
 def dcm2ang321(a: Mat) -> tuple[float, float, float]:
@@ -58,14 +40,18 @@ def dcm2ang321(a: Mat) -> tuple[float, float, float]:
     return math.atan2(a[1][2], a[2][2]), phi_y, math.atan2(a[0][1], a[0][0])
 
 
-def euler_rates(phi: Vec, omega: Vec, min_cos_phi_y: float = MIN_COS_PHI_Y) -> tuple[float, float, float]:
+def euler_rates(phi: Vec, omega: Vec, min_cos_phi_y: float = MIN_COS_PHI_Y,
+                sin_cos: tuple[Vec, Vec] | None = None) -> tuple[float, float, float]:
     """Eq. 14 (sub2 form, tan = sin/cos): Euler-angle rates from body rates.
 
-    Raises ``EulerSingularityError`` unless cos phi_y >= ``min_cos_phi_y``: phi_y (unlimited) can leave
-    (-90, 90) deg only through the singularity, so this also catches an RK stage that jumped over it.
+    ``sin_cos``: (sines, cosines) of ``phi`` if the caller has them already. Raises ``EulerSingularityError``
+    unless cos phi_y >= ``min_cos_phi_y``: phi_y (unlimited) can leave (-90, 90) deg only through the
+    singularity, so this also catches an RK stage that jumped over it.
     """
-    sin_1, cos_1 = math.sin(phi[0]), math.cos(phi[0])
-    sin_2, cos_2 = math.sin(phi[1]), math.cos(phi[1])
+    if sin_cos is None:
+        sin_1, sin_2, cos_1, cos_2 = math.sin(phi[0]), math.sin(phi[1]), math.cos(phi[0]), math.cos(phi[1])
+    else:
+        (sin_1, sin_2, _), (cos_1, cos_2, _) = sin_cos
     # phi_y must stay in (-90, 90) deg (+ k 360): a step that jumps over the singularity is caught too
     if not cos_2 >= min_cos_phi_y:  # also catches NaN
         raise EulerSingularityError(
@@ -91,7 +77,7 @@ def gravity_gradient_torque(amat: Mat, rad: Vec, inertia: Mat, mu: float) -> tup
     if rmag < 1e-6:
         return 0.0, 0.0, 0.0
     rb = matvec(amat, rad_norm)
-    rxxir = cross(rb, matvec(inertia, rb))
+    rxxir = cross3(rb, matvec(inertia, rb))
     ggmul = 3.0 * mu / rmag**3
     return ggmul * rxxir[0], ggmul * rxxir[1], ggmul * rxxir[2]
 
@@ -170,44 +156,33 @@ def attitude_derivative(x: Vec, rad: Vec, t_aero: Vec, p: AttitudeParams) -> lis
     """
     phi = x[0:3]
     omega = x[3:6]
-    amat = dcm321(phi)
-    t_gg = gravity_gradient_torque(amat, rad, p.inertia, p.mu)
-    t_c = control_torque(phi, omega, p.gains)
-    wxh = cross(omega, matvec(p.inertia, omega))
+    sc = ((math.sin(phi[0]), math.sin(phi[1]), math.sin(phi[2])),
+          (math.cos(phi[0]), math.cos(phi[1]), math.cos(phi[2])))
+    amat = rotation321(*sc)  # eq. 15
+    t_gg = gravity_gradient_torque(amat, rad, p.inertia, p.mu)  # eq. 17 (x 3)
+    t_c = control_torque(phi, omega, p.gains)  # eq. 16
+    wxh = cross3(omega, matvec(p.inertia, omega))
     t_total = (t_gg[0] + t_aero[0] + t_c[0] - wxh[0],
                t_gg[1] + t_aero[1] + t_c[1] - wxh[1],
                t_gg[2] + t_aero[2] + t_c[2] - wxh[2])
     omegadot = matvec(p.inertia_inv, t_total)
-    phidot = euler_rates(phi, omega, p.min_cos_phi_y)
+    phidot = euler_rates(phi, omega, p.min_cos_phi_y, sc)
     return [*phidot, *omegadot]
 
 
 def integrate(p: AttitudeParams, x0: Vec, times: Sequence[float],
-              inputs_at: Callable[[float], tuple[Vec, Vec]]) -> tuple[np.ndarray, np.ndarray, list[float]]:
+              inputs: Callable[[np.ndarray], Sequence[tuple[Vec, Vec]]]) -> tuple[np.ndarray, np.ndarray, list[float]]:
     """attitude mode 3: RK4 over ``times`` with ``p.idiv`` steps per sample.
 
-    ``inputs_at(t) -> (R inertial, T_aero body at c.m.)`` is read at every RK stage time.
-    Returns (samples (n, 6) with row 0 = x0, omega_dot (n, 3) at the samples, state at times[-1]).
+    ``inputs(ts)``: for all the RK times ``ts`` (k,) in one call, per time a pair (R inertial (m), T_aero body
+    at the c.m. (N m)). Returns (samples (n, 6) with row 0 = x0, omega_dot (n, 3) at the samples, state at times[-1]).
     """
-    idiv = p.idiv
 
-    def deriv(t: float, x: Sequence[float]) -> list[float]:
-        rad, t_aero = inputs_at(t)
+    def deriv(t: float, x: Sequence[float], row: tuple[Vec, Vec]) -> list[float]:
         try:
-            return attitude_derivative(x, rad, t_aero, p)
+            return attitude_derivative(x, row[0], row[1], p)
         except EulerSingularityError as e:
             raise EulerSingularityError(f"at t = {t:.9g} s: {e}") from None
 
-    y = [float(v) for v in x0]
-    f = deriv(times[0], y)  # also RK stage 1 of the first step
-    rows, rates = [y], [f[3:6]]
-    for k in range(len(times) - 1):
-        t0, t1 = times[k], times[k + 1]
-        h = (t1 - t0) / idiv
-        for s in range(idiv):
-            te = t1 if s == idiv - 1 else t0 + (s + 1) * h
-            y = rk4_step(deriv, t0 + s * h, y, h, k1=f, t_end=te)
-            f = deriv(te, y)
-        rows.append(y)
-        rates.append(f[3:6])
-    return np.array(rows, dtype=np.float64), np.array(rates, dtype=np.float64), y
+    states, rates, end = rk4(deriv, [float(v) for v in x0], times, p.idiv, inputs, end_node=True)
+    return np.array(states, dtype=np.float64), np.array([r[3:6] for r in rates], dtype=np.float64), end

@@ -10,44 +10,18 @@ from __future__ import annotations
 
 import numpy as np
 
+from subsims import numerics
+from subsims.numerics import rotation321
+
+cross, skew = numerics.cross, numerics.skew  # a x b and a~, kept where the flexbody's users look
+
 GIMBAL_EPS = 1e-9  # |cos theta_2| below which theta_1 / theta_3 are split by holding theta_1
 
 
-def skew(a: np.ndarray) -> np.ndarray:
-    """a^~ with a^~ b = a x b (report L156)."""
-    return np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
-
-
-def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a x b along the last axis, broadcasting (a lean np.cross: this is the inner loop of the model)."""
-    if a.ndim == 1 and b.ndim == 1:
-        a0, a1, a2 = a
-        b0, b1, b2 = b
-        return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
-    if a.shape == b.shape or a.ndim < b.ndim:
-        shape = b.shape if a.ndim < b.ndim or a.shape == b.shape else a.shape
-    elif b.ndim < a.ndim:
-        shape = a.shape
-    else:
-        shape = np.broadcast_shapes(a.shape, b.shape)
-    out = np.empty(shape)
-    out[..., 0] = a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]
-    out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
-    out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
-    return out
-
-
 def euler123_to_dcm(theta: np.ndarray) -> np.ndarray:
-    """R^14 = R^12(theta_1) R^23(theta_2) R^34(theta_3), body -> inertial (7-1)."""
-    c1, c2, c3 = np.cos(theta)
-    s1, s2, s3 = np.sin(theta)
-    return np.array(
-        [
-            [c2 * c3, -c2 * s3, s2],
-            [c1 * s3 + s1 * s2 * c3, c1 * c3 - s1 * s2 * s3, -s1 * c2],
-            [s1 * s3 - c1 * s2 * c3, s1 * c3 + c1 * s2 * s3, c1 * c2],
-        ]
-    )
+    """R^14 = R^12(theta_1) R^23(theta_2) R^34(theta_3), body -> inertial (7-1): these active rotations are the
+    passive 3-2-1 matrix (Nixon eq. 15, ``subsims.numerics.rotation321``) of the negated angles."""
+    return np.array(rotation321(-np.sin(theta), np.cos(theta)))
 
 
 def euler_rates(theta: np.ndarray, omega: np.ndarray) -> np.ndarray:

@@ -19,13 +19,15 @@ derivative slot is 0), so nothing is singular at cos(theta_2) = 0.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from scipy.linalg.lapack import dpotrf, dpotrs
 
-from subsims.flexbody.kinematics import cross, euler123_from_dcm, quat_rate, quat_to_dcm, skew
+from subsims.flexbody.kinematics import euler123_from_dcm, quat_rate, quat_to_dcm
+from subsims.numerics import cross, rk4, skew, substeps
 
 Loads = tuple[np.ndarray, np.ndarray, np.ndarray]  # (f0 (3,), tau0 (3,), fp (n, 3)), body axes
 
@@ -296,54 +298,37 @@ def finish_step(Y: np.ndarray, t: int) -> np.ndarray:
     return Y
 
 
-def rk4_step(f: Callable[[float, np.ndarray], np.ndarray], t: float, y: np.ndarray, h: float) -> np.ndarray:
-    """One classical fourth-order Runge-Kutta step."""
-    k1 = f(t, y)
-    k2 = f(t + 0.5 * h, y + 0.5 * h * k1)
-    k3 = f(t + 0.5 * h, y + 0.5 * h * k2)
-    k4 = f(t + h, y + h * k3)
-    return y + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
-
-
-def substeps(dt: float, h: float) -> int:
-    """Number of equal RK4 steps of at most h that land exactly on the next sample time."""
-    return max(1, int(np.ceil(dt / h - 1e-9)))
-
-
 def integrate_samples(
-    f: Callable[[float, np.ndarray], np.ndarray],
+    f: Callable[[float, np.ndarray, Any], np.ndarray],
     y0: np.ndarray,
     times: np.ndarray,
     h: float,
     finish: Callable[[np.ndarray], np.ndarray] | None = None,
+    inputs: Callable[[np.ndarray], Sequence[Any]] | None = None,
 ) -> np.ndarray:
-    """States at ``times`` (row 0 = y0) by fixed-step RK4, steps of <= h landing on every sample time."""
-    ys = np.empty((len(times), y0.size))
-    y = np.array(y0, dtype=np.float64)
-    ys[0] = y
-    for k in range(1, len(times)):
-        t0, t1 = float(times[k - 1]), float(times[k])
-        nsub = substeps(t1 - t0, h)
-        hs = (t1 - t0) / nsub
-        for j in range(nsub):
-            y = rk4_step(f, t0 + j * hs, y, hs)
-            if finish is not None:
-                y = finish(y)
-        ys[k] = y
-    return ys
+    """States at ``times`` (row 0 = y0) by the shared fixed-step RK4, steps of <= h landing on every sample time;
+    ``f(t, y, row)`` with ``row`` from ``inputs(ts)`` (all RK times at once; None without)."""
+    states, _, _ = rk4(f, np.array(y0, dtype=np.float64), times, substeps(times, h), inputs, finish=finish)
+    return np.array(states)
 
 
 def integrate(
     model: FlexModel,
     Y0: np.ndarray,
     times: np.ndarray,
-    loads: Callable[[float, np.ndarray], Loads],
+    loads: Callable[[float, np.ndarray], Loads] | None,
     h: float,
+    inputs: Callable[[np.ndarray], Sequence[Loads]] | None = None,
 ) -> np.ndarray:
-    """Integrate (8-5) over ``times``; ``loads(t, Y)`` is called at every RK stage (open or closed loop)."""
-    return integrate_samples(
-        lambda tt, y: state_derivative(model, y, loads(tt, y)), Y0, times, h, lambda y: finish_step(y, model.t)
-    )
+    """Integrate (8-5) over ``times``: ``loads(t, Y)`` called at every RK stage (closed loop), or ``inputs(ts)``
+    giving the loads at all the RK times ``ts`` at once (open loop, e.g. from a subsim's inputs)."""
+    if inputs is None:
+        def f(tt: float, y: np.ndarray, _: None) -> np.ndarray:
+            return state_derivative(model, y, loads(tt, y))
+    else:
+        def f(tt: float, y: np.ndarray, row: Loads) -> np.ndarray:
+            return state_derivative(model, y, row)
+    return integrate_samples(f, Y0, times, h, lambda y: finish_step(y, model.t), inputs)
 
 
 # --------------------------------------------------------------------------------------------------

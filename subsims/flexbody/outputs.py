@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -23,16 +24,14 @@ FREE_OUTPUTS = ("R", "euler123", "euler_zyx", "quat", "V", "omega", "Vdot", "ome
                 "cm", "kinetic_energy", "elastic_energy", "p_I", "H_O")
 
 
-def free_outputs(
-    model: FlexModel, times: np.ndarray, ys: np.ndarray, loads: Callable[[float, np.ndarray], Loads]
-) -> dict[str, np.ndarray]:
-    """Mode "free" outputs at each sample (row of ``ys``); Vdot, omega_dot use the loads at the sample."""
+def free_outputs(model: FlexModel, times: np.ndarray, ys: np.ndarray, loads: Sequence[Loads]) -> dict[str, np.ndarray]:
+    """Mode "free" outputs at each sample (row of ``ys``); Vdot, omega_dot use the sample's ``loads``."""
     out: dict[str, list] = {name: [] for name in FREE_OUTPUTS}
-    for tt, y in zip(times, ys):
+    for y, load in zip(ys, loads, strict=True):
         R, theta, eta, V, w, eta_dot, quat = split_state(y, model.t)
         P, H = momenta(model, y)
         q = deflections(model, eta)
-        x = accelerations(model, V, w, eta, eta_dot, loads(float(tt), y))
+        x = accelerations(model, V, w, eta, eta_dot, load)
         sample = {
             "R": R, "euler123": theta, "euler_zyx": euler_zyx_from_dcm(quat_to_dcm(quat)), "quat": quat,
             "V": V, "omega": w, "Vdot": x[:3], "omega_dot": x[3:6], "eta": eta, "eta_dot": eta_dot,
@@ -51,14 +50,15 @@ def appendage_outputs(
     model: FlexModel,
     times: np.ndarray,
     ys: np.ndarray,
-    solve: Callable[[float, np.ndarray], tuple[dict[str, np.ndarray], np.ndarray, np.ndarray]],
+    solve: Callable[[Any, np.ndarray], tuple[np.ndarray, np.ndarray]],
+    inputs: Sequence[Mapping[str, np.ndarray]],
     D: np.ndarray,
 ) -> dict[str, np.ndarray]:
-    """Modes "attitude"/"base" outputs; ``solve(t, y) -> (inputs at t, a_O, eta_ddot)``."""
+    """Modes "attitude"/"base" outputs; ``inputs`` per sample, ``solve(inputs, y) -> (a_O, eta_ddot)``."""
     t = model.t
     out: dict[str, list] = {}
-    for tt, y in zip(times, ys):
-        d, a_O, eta_dd = solve(float(tt), y)
+    for y, d in zip(ys, inputs, strict=True):
+        a_O, eta_dd = solve(d, y)
         eta, eta_dot = y[:t], y[t:]
         sample = appendage_loads(model, eta, eta_dot, eta_dd, a_O, d["omega"], d["omega_dot"], d["fp"], D)
         sample.update(a_O=a_O, eta=eta, eta_dot=eta_dot, q=deflections(model, eta).ravel(),

@@ -103,7 +103,7 @@ def simulate_free(
     loads = loads or (lambda t, y: zero)
     times = np.asarray(times, dtype=np.float64)
     ys = _piecewise_integrate(model, setup.Y0, times, loads, h or setup.h, breakpoints)
-    out = free_outputs(model, times, ys, loads)
+    out = free_outputs(model, times, ys, [loads(float(tt), y) for tt, y in zip(times, ys)])
     out["t"] = times
     return out
 

@@ -32,6 +32,7 @@ from subsims.flexbody.appendage import appendage_accelerations, inertia_split
 from subsims.flexbody.config import FlexSetup, build
 from subsims.flexbody.model import Loads, integrate, integrate_samples
 from subsims.flexbody.outputs import appendage_outputs, free_outputs
+from subsims.numerics import as_table
 
 
 def _ports(setup: FlexSetup) -> tuple[dict[str, Port], dict[str, Port]]:
@@ -131,14 +132,14 @@ class FlexBody(Subsim):
 
     # -- input access -------------------------------------------------------------------------------
 
-    def _read(self, u: InputFunction, t: float) -> dict[str, np.ndarray]:
-        d = u(t)
-        out = {}
-        for name, port in self.inputs.items():
-            v = d.get(name)
-            out[name] = np.zeros(port.size) if v is None else np.asarray(v, dtype=np.float64).reshape(port.size)
-        out["fp"] = out["fp"].reshape(self.model.n, 3)
-        return out
+    def _inputs(self, u: InputFunction, ts: np.ndarray) -> list[dict[str, np.ndarray]]:
+        """The inputs at all the times ``ts`` from ONE call of ``u``, per time a dict (missing inputs: zero)."""
+        values = u(ts)
+        tables = {name: as_table(values.get(name, np.zeros(port.size)), ts.size, port.size, name)
+                  for name, port in self.inputs.items()}
+        tables["fp"] = tables["fp"].reshape(ts.size, self.model.n, 3)
+        names = tuple(tables)
+        return [dict(zip(names, row)) for row in zip(*tables.values())]
 
     # -- advance --------------------------------------------------------------------------------------
 
@@ -157,30 +158,28 @@ class FlexBody(Subsim):
     def _advance_free(self, y0: np.ndarray, times: np.ndarray, u: InputFunction) -> tuple[dict, np.ndarray]:
         model = self.model
 
-        def loads(tt: float, y: np.ndarray | None = None) -> Loads:
-            d = self._read(u, tt)
-            return d["f0"], d["tau0"], d["fp"]
+        def loads(ts: np.ndarray) -> list[Loads]:
+            return [(d["f0"], d["tau0"], d["fp"]) for d in self._inputs(u, ts)]
 
-        ys = integrate(model, y0, times, loads, self.setup.h)
+        ys = integrate(model, y0, times, None, self.setup.h, inputs=loads)
         if not np.all(np.isfinite(ys)):
             raise ModelError("flexbody: state became non-finite")
-        out = free_outputs(model, times, ys, loads)
+        out = free_outputs(model, times, ys, loads(times))
         return {name: out[name] for name in self.outputs}, ys[-1].copy()
 
     def _advance_appendage(self, y0: np.ndarray, times: np.ndarray, u: InputFunction) -> tuple[dict, np.ndarray]:
         model, t = self.model, self.model.t
         mode_c = self.setup.mode == "attitude"
 
-        def solve(tt: float, y: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray]:
-            d = self._read(u, tt)
-            a_O, eta_dd = appendage_accelerations(
+        def solve(d: Mapping[str, np.ndarray], y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            return appendage_accelerations(
                 model, y[:t], y[t:], d["omega"], d["omega_dot"], d["fp"],
                 F_bus=d["F_bus"] if mode_c else None, a_O=None if mode_c else d["a_O"],
             )
-            return d, a_O, eta_dd
 
-        ys = integrate_samples(lambda tt, y: np.concatenate([y[t:], solve(tt, y)[2]]), y0, times, self.setup.h)
+        ys = integrate_samples(lambda tt, y, d: np.concatenate([y[t:], solve(d, y)[1]]), y0, times, self.setup.h,
+                               inputs=lambda ts: self._inputs(u, ts))
         if not np.all(np.isfinite(ys)):
             raise ModelError("flexbody: state became non-finite")
-        out = appendage_outputs(model, times, ys, solve, self.split["D"])
+        out = appendage_outputs(model, times, ys, solve, self._inputs(u, times), self.split["D"])
         return {name: out[name] for name in self.outputs}, ys[-1].copy()

@@ -15,8 +15,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from subsims.attitude.model import dcm321_batch
 from subsims.flexbody.kinematics import euler123_from_dcm
+from subsims.numerics import dcm321_batch
 
 
 def zyx_to_euler123(phi: np.ndarray) -> np.ndarray:

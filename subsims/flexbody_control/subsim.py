@@ -19,6 +19,7 @@ import numpy as np
 
 from cosim.subsim import InputFunction, Port, Subsim
 from subsims.flexbody_control.law import ControlParams, control_torque
+from subsims.numerics import input_rows
 
 
 class AttitudeControl(Subsim):
@@ -40,9 +41,8 @@ class AttitudeControl(Subsim):
         self, state: np.ndarray, times: np.ndarray, u: InputFunction
     ) -> tuple[Mapping[str, np.ndarray], np.ndarray]:
         times = np.asarray(times, dtype=np.float64)
-        tau = np.empty((times.size, 3))
-        for k, tt in enumerate(times):
-            d = u(float(tt))
-            tau[k] = control_torque(self.p, float(tt), np.asarray(d["euler123"], dtype=np.float64),
-                                    np.asarray(d["omega"], dtype=np.float64), left=k == times.size - 1 and k > 0)
+        rows = input_rows(u, times, self.inputs)  # one call for all the samples
+        last = times.size - 1
+        tau = np.array([control_torque(self.p, tt, euler, omega, left=k == last and k > 0)
+                        for k, (tt, (euler, omega)) in enumerate(zip(times.tolist(), rows))]).reshape(-1, 3)
         return {"tau0": tau}, np.array(state, dtype=np.float64)

@@ -20,30 +20,28 @@ def gauss_nodes(n_samples: int) -> tuple[np.ndarray, np.ndarray]:
     return 0.5 * (x + 1.0), 0.5 * w
 
 
-def _nodes(times: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Every quadrature node of every sample step, (steps * p,), and the step lengths (steps,)."""
+def _node_values(f: Callable[[np.ndarray], np.ndarray], times: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """f at every step's nodes t_i + h_i x_k, in ONE call: (n-1, p, size)."""
     h = times[1:] - times[:-1]
-    return (times[:-1, None] + h[:, None] * x[None, :]).ravel(), h
+    ts = times[:-1, None] + h[:, None] * x[None, :]
+    return np.asarray(f(ts.ravel()), dtype=np.float64).reshape(ts.shape + (-1,))
 
 
 def integrate_once(f: Callable[[np.ndarray], np.ndarray], times: np.ndarray, y0: np.ndarray) -> np.ndarray:
-    """y(t_i) = y0 + integral of f from t_0 to t_i, at every sample time (y' = u).
-
-    ``f`` takes all the quadrature nodes at once, (k,) -> (k, size): one input evaluation per interval."""
+    """y(t_i) = y0 + integral of f from t_0 to t_i, at every sample time (y' = u); ``f(ts)`` -> (k, size)."""
     x, w = gauss_nodes(times.size)
-    ts, h = _nodes(times, x)
-    fs = f(ts).reshape(h.size, x.size, -1)
-    steps = h[:, None] * np.einsum("k,skm->sm", w, fs)
+    fs = _node_values(f, times, x)
+    steps = (times[1:] - times[:-1])[:, None] * np.einsum("k,skm->sm", w, fs)
     return np.cumsum(np.vstack([y0[None, :], steps]), axis=0)  # y[i+1] = y[i] + step i, in order
 
 
 def integrate_twice(
     f: Callable[[np.ndarray], np.ndarray], times: np.ndarray, y0: np.ndarray, v0: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """y'' = u: v = v0 + int u, y = y0 + v0 (t - t0) + int (t - s) u(s) ds, per step."""
+    """y'' = u: v = v0 + int u, y = y0 + v0 (t - t0) + int (t - s) u(s) ds, per step; ``f(ts)`` -> (k, size)."""
     x, w = gauss_nodes(times.size + 1)
-    ts, h = _nodes(times, x)
-    fs = f(ts).reshape(h.size, x.size, -1)
+    fs = _node_values(f, times, x)
+    h = times[1:] - times[:-1]
     dv = h[:, None] * np.einsum("k,skm->sm", w, fs)
     moment = (h * h)[:, None] * np.einsum("k,skm->sm", w * (1.0 - x), fs)
     v = np.cumsum(np.vstack([v0[None, :], dv]), axis=0)

@@ -31,13 +31,14 @@ released at 15,000 ft, 300 ft/s, flight path -60 deg, SRB flying tail first (alp
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from subsims.lagrange_pair import aero
+from subsims.numerics import cross, dcm321, rk4, substeps
 
 GZERO = 32.1740485  # ft/s^2, listing constant
 DEG = 1.0 / aero.RAD2DEG  # rad per deg (1/CNV)
@@ -82,13 +83,6 @@ def tilde(a: np.ndarray) -> np.ndarray:
     return np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
 
 
-def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Vector cross product ``a x b`` of two 3-vectors (VCROSS; faster than np.cross for single vectors)."""
-    a0, a1, a2 = float(a[0]), float(a[1]), float(a[2])
-    b0, b1, b2 = float(b[0]), float(b[1]), float(b[2])
-    return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
-
-
 def inertia_matrix(
     ixx: float, iyy: float, izz: float, ixy: float = 0.0, ixz: float = 0.0, iyz: float = 0.0
 ) -> np.ndarray:
@@ -97,17 +91,8 @@ def inertia_matrix(
 
 
 def dcm_321(psi: float, theta: float, phi: float) -> np.ndarray:
-    """I -> body matrix of a 3-2-1 Euler sequence (listing, parachute initialization)."""
-    s3, c3 = math.sin(psi), math.cos(psi)
-    s2, c2 = math.sin(theta), math.cos(theta)
-    s1, c1 = math.sin(phi), math.cos(phi)
-    return np.array(
-        [
-            [c2 * c3, c2 * s3, -s2],
-            [s1 * s2 * c3 - c1 * s3, s1 * s2 * s3 + c1 * c3, s1 * c2],
-            [c1 * s2 * c3 + s1 * s3, c1 * s2 * s3 - s1 * c3, c1 * c2],
-        ]
-    )
+    """I -> body matrix of a 3-2-1 Euler sequence (listing, parachute initialization): the one 3-2-1 DCM."""
+    return np.array(dcm321((phi, theta, psi)))
 
 
 def euler_321(a: np.ndarray) -> np.ndarray:
@@ -139,11 +124,11 @@ class PairModel:
     aero: bool = True
     gravity: bool = True
     formulation: str = "stabilized"
-    M: np.ndarray = field(init=False)
-    MINV: np.ndarray = field(init=False)
-    lt_b: np.ndarray = field(init=False)
-    lt_c: np.ndarray = field(init=False)
-    a_34: np.ndarray = field(init=False)
+    M: np.ndarray = field(init=False, repr=False)  # derived matrices: built once, too big to print
+    MINV: np.ndarray = field(init=False, repr=False)
+    lt_b: np.ndarray = field(init=False, repr=False)
+    lt_c: np.ndarray = field(init=False, repr=False)
+    a_34: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         if self.formulation not in FORMULATIONS:
@@ -319,43 +304,6 @@ LoadFunction = Callable[[float], np.ndarray | None]
 EvalHook = Callable[[float, Evaluation], None]
 
 
-def _eval(model: PairModel, x: np.ndarray, t: float, loads: LoadFunction | None, hook: EvalHook | None) -> Evaluation:
-    ev = evaluate(model, x, None if loads is None else loads(t))
-    if hook is not None:
-        hook(t, ev)
-    return ev
-
-
-def rk4_step(
-    model: PairModel, x: np.ndarray, t0: float, t1: float, ev0: Evaluation,
-    loads: LoadFunction | None, hook: EvalHook | None,
-) -> np.ndarray:
-    """One classical Runge-Kutta step from t0 to t1; ``ev0`` is the evaluation at (t0, x); loads read at each stage."""
-    h = t1 - t0
-    tm = t0 + 0.5 * h
-    k1 = derivative(model, ev0)
-    k2 = derivative(model, _eval(model, x + 0.5 * h * k1, tm, loads, hook))
-    k3 = derivative(model, _eval(model, x + 0.5 * h * k2, tm, loads, hook))
-    k4 = derivative(model, _eval(model, x + h * k3, t1, loads, hook))
-    return x + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
-
-
-def euler_step(
-    model: PairModel, x: np.ndarray, t0: float, t1: float, ev0: Evaluation,
-    loads: LoadFunction | None, hook: EvalHook | None,
-) -> np.ndarray:
-    """One forward Euler step (for comparisons only)."""
-    return x + (t1 - t0) * derivative(model, ev0)
-
-
-_STEPPERS = {"rk4": rk4_step, "euler": euler_step}
-
-
-def substeps(t0: float, t1: float, dt: float) -> int:
-    """Number of equal sub-steps of at most ``dt`` that span [t0, t1]."""
-    return max(1, math.ceil((t1 - t0) / dt - 1e-9))
-
-
 def integrate(
     model: PairModel,
     x0: np.ndarray,
@@ -364,34 +312,35 @@ def integrate(
     dt: float = 0.01,
     integrator: str = "rk4",
     hook: EvalHook | None = None,
+    inputs: Callable[[np.ndarray], Sequence[np.ndarray]] | None = None,
 ) -> tuple[list[Evaluation], np.ndarray]:
     """Integrate from ``x0`` at ``times[0]``; return the evaluations at every sample time and the final state.
 
-    Between consecutive samples the interval is cut into equal sub-steps of at most ``dt``. The
-    evaluation at a sample is also the first RK stage of the next step (the listing prints the
-    derivative pass that follows each completed step). ``hook(t, ev)`` sees every evaluation.
+    Between consecutive samples the interval is cut into equal sub-steps of at most ``dt`` (the shared RK4,
+    ``subsims.numerics.rk4``; ``integrator="euler"`` for comparisons). The evaluation at a sample is also the
+    first RK stage of the next step (the listing prints the derivative pass that follows each completed step).
+    Extra loads (12, body axes): ``loads(t)`` called at every evaluation, or ``inputs(ts)`` giving them at all
+    the RK times ``ts`` at once. ``hook(t, ev)`` sees every evaluation.
     """
-    step = _STEPPERS[integrator]
-    x = np.array(x0, dtype=np.float64)
-    samples: list[Evaluation] = []
-    n = len(times)
-    for k in range(n):
-        t = float(times[k])
-        ev = _eval(model, x, t, loads, hook)
-        samples.append(ev)
-        if k == n - 1:
-            break
-        t_next = float(times[k + 1])
-        m = substeps(t, t_next, dt)
-        h = (t_next - t) / m
-        for j in range(m):
-            tj = t + j * h
-            tj1 = t_next if j == m - 1 else t + (j + 1) * h
-            if j > 0:
-                ev = _eval(model, x, tj, loads, hook)
-            x = step(model, x, tj, tj1, ev, loads, hook)
-        if not np.all(np.isfinite(x)):
-            raise FloatingPointError(f"state became non-finite between t={t} and t={t_next}")
+    if integrator not in INTEGRATORS:
+        raise ValueError(f"integrator must be one of {list(INTEGRATORS)}, got {integrator!r}")
+
+    def evaluation(t: float, x: np.ndarray, row: np.ndarray | None) -> Evaluation:
+        ev = evaluate(model, x, row if inputs is not None else None if loads is None else loads(t))
+        if hook is not None:
+            hook(t, ev)
+        return ev
+
+    def node(t: float, x: np.ndarray, row: np.ndarray | None) -> tuple[np.ndarray, Evaluation]:
+        ev = evaluation(t, x, row)
+        return derivative(model, ev), ev
+
+    times = np.asarray(times, dtype=np.float64)
+    states, samples, x = rk4(lambda t, x, row: derivative(model, evaluation(t, x, row)), x0, times,
+                             substeps(times, dt), inputs, node=node, end_node=True, euler=integrator == "euler")
+    bad = [k for k, s in enumerate(states) if not np.all(np.isfinite(s))]
+    if bad:
+        raise FloatingPointError(f"state became non-finite between t={times[bad[0] - 1]} and t={times[bad[0]]}")
     return samples, x
 
 

@@ -15,6 +15,7 @@ import numpy as np
 
 from cosim.subsim import InputFunction, ModelError, Port, Subsim
 from subsims.lagrange_pair import model
+from subsims.numerics import as_table
 
 INPUT_PORTS: dict[str, Port] = {
     "force_B": Port(3, "lbf", "extra force on the SRB at its CM, B axes"),
@@ -71,16 +72,18 @@ class LagrangePair(Subsim):
         if x0.shape != (self.model.state_size,):
             raise ValueError(f"state must have shape ({self.model.state_size},), got {x0.shape}")
 
-        def loads(t: float) -> np.ndarray:
-            v = u(t)
-            fx = np.concatenate([np.asarray(v[k], dtype=np.float64).reshape(3) for k in INPUT_PORTS])
+        def loads(ts: np.ndarray) -> np.ndarray:
+            """The extra loads (k, 12) at all the RK times ``ts``, from one call of ``u``."""
+            values = u(ts)
+            fx = np.hstack([as_table(values[k], ts.size, 3, k) for k in INPUT_PORTS])
             if not np.all(np.isfinite(fx)):
-                raise FloatingPointError(f"extra loads at t={t!r} are not finite: {fx.tolist()}")
+                i = int(np.argmin(np.isfinite(fx).all(axis=1)))
+                raise FloatingPointError(f"extra loads at t={float(ts[i])!r} are not finite: {fx[i].tolist()}")
             return fx
 
         try:
-            samples, x1 = model.integrate(self.model, x0, np.asarray(times, dtype=np.float64), loads, self.dt,
-                                          self.integrator)
+            samples, x1 = model.integrate(self.model, x0, np.asarray(times, dtype=np.float64), None, self.dt,
+                                          self.integrator, inputs=loads)
         except FloatingPointError as exc:
             raise ModelError(f"lagrange_pair: {exc}") from exc
         return model.stack_outputs(self.model, samples), x1

@@ -15,6 +15,7 @@ import numpy as np
 
 from cosim.subsim import InputFunction, Port, Subsim
 from subsims.lagrange_pair.aero import pair_aero_loads
+from subsims.numerics import input_rows
 
 INPUT_PORTS: dict[str, Port] = {
     "pos_B": Port(3, "ft", "SRB CM position, I frame (north, east, down); gives the altitude for the density"),
@@ -47,9 +48,9 @@ class LagrangePairAero(Subsim):
         self, state: np.ndarray, times: np.ndarray, u: InputFunction
     ) -> tuple[Mapping[str, np.ndarray], np.ndarray]:
         out = {name: np.empty((len(times), 3)) for name in OUTPUT_PORTS}
-        for k, t in enumerate(times):
-            v = u(float(t))
-            loads = pair_aero_loads(-float(v["pos_B"][2]), np.asarray(v["vel_B"], float), np.asarray(v["vel_C"], float))
+        rows = input_rows(u, np.asarray(times, dtype=np.float64), INPUT_PORTS)
+        for k, (pos_b, vel_b, vel_c) in enumerate(rows):  # one call of u for all the samples
+            loads = pair_aero_loads(-float(pos_b[2]), vel_b, vel_c)
             for name, value in zip(OUTPUT_PORTS, loads, strict=True):
                 out[name][k] = value
         return out, np.array(state, dtype=np.float64)

@@ -13,9 +13,9 @@ from typing import Any
 
 import numpy as np
 
-from cosim.subsim import ModelError
+from subsims.numerics import PhysicsError, Vec, as_table, rk4, vecnorm
 from subsims.satellite import constants as C
-from subsims.satellite.numerics import Vec, as_float, as_int, as_vec3, rk4_step, vecnorm
+from subsims.satellite.parameters import as_float, as_int, as_vec3
 
 PARAM_NAMES = ("mu", "mass", "idiv", "r0", "v0", "altitude_km", "rearth_km", "inclination_deg")
 
@@ -70,7 +70,7 @@ def orbit_derivative(x: Vec, f_aero: Vec, mu: float, mass: float) -> list[float]
     """sub1: xdot = [V, (F_grav + F_aero)/m] with F_grav = -(mu m / R^2) R_hat (eqs. 11-12)."""
     rnorm, rmag = vecnorm(x[0:3])
     if rmag == 0.0:
-        raise ModelError("orbit radius is zero: inverse-square gravity is undefined")
+        raise PhysicsError("orbit radius is zero: inverse-square gravity is undefined")
     gmag = mu * mass / rmag**2
     im = 1.0 / mass
     return [x[3], x[4], x[5],
@@ -80,23 +80,19 @@ def orbit_derivative(x: Vec, f_aero: Vec, mu: float, mass: float) -> list[float]
 
 
 def integrate(p: OrbitParams, x0: Vec, times: Sequence[float],
-              f_aero_at: Callable[[float], Vec]) -> tuple[np.ndarray, list[float]]:
-    """orbit mode 3: RK4 over ``times`` with ``p.idiv`` steps per sample; F_aero read at every RK stage time.
+              f_aero: Callable[[np.ndarray], Any] | None = None) -> tuple[np.ndarray, list[float]]:
+    """orbit mode 3: RK4 over ``times`` with ``p.idiv`` steps per sample, F_aero read at every RK stage time.
 
-    Returns (samples (n, 6) with row 0 = x0, state at times[-1]).
+    ``f_aero(ts)``: the aerodynamic force (inertial, N) at all the RK times ``ts`` (k,) in one call, shape
+    (k, 3), or (3,) if constant; None: no force. Returns (samples (n, 6) with row 0 = x0, state at times[-1]).
     """
-    mu, mass, idiv = p.mu, p.mass, p.idiv
+    mu, mass = p.mu, p.mass
 
-    def deriv(t: float, x: list[float]) -> list[float]:
-        return orbit_derivative(x, f_aero_at(t), mu, mass)
+    def deriv(t: float, x: list[float], force: Vec) -> list[float]:
+        return orbit_derivative(x, force, mu, mass)
 
-    y = [float(v) for v in x0]
-    rows = [y]
-    for k in range(len(times) - 1):
-        t0, t1 = times[k], times[k + 1]
-        h = (t1 - t0) / idiv
-        for s in range(idiv):
-            last = s == idiv - 1
-            y = rk4_step(deriv, t0 + s * h, y, h, t_end=t1 if last else t0 + (s + 1) * h)
-        rows.append(y)
-    return np.array(rows, dtype=np.float64), y
+    def forces(ts: np.ndarray) -> list[list[float]]:
+        return as_table((0.0, 0.0, 0.0) if f_aero is None else f_aero(ts), ts.size, 3, "f_aero").tolist()
+
+    states, _, end = rk4(deriv, [float(v) for v in x0], times, p.idiv, forces)
+    return np.array(states, dtype=np.float64), end

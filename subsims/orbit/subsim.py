@@ -2,17 +2,14 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from typing import Any
-
 import numpy as np
 
-from cosim.subsim import InputFunction, Port, Subsim
+from cosim.subsim import InputFunction, Port
+from subsims.adapters import Advanced, ParamsSubsim, reports_physics_errors
 from subsims.orbit.model import OrbitParams, integrate
-from subsims.satellite.numerics import input_reader
 
 
-class Orbit(Subsim):
+class Orbit(ParamsSubsim):
     """Point-mass orbit, inverse-square gravity + aerodynamic force. State [R, V] inertial.
 
     Parameters (all optional, paper's values by default): ``mu`` (m^3/s^2), ``mass`` (kg), ``idiv``
@@ -27,14 +24,9 @@ class Orbit(Subsim):
         "V": Port(3, "m/s", "orbit velocity, inertial"),
     }
 
-    def initial_state(self, params: Mapping[str, Any]) -> np.ndarray:
-        self.p = OrbitParams.from_mapping(params)
-        return self.p.initial_state()
+    params_type = OrbitParams
 
-    def advance(
-        self, state: np.ndarray, times: np.ndarray, u: InputFunction
-    ) -> tuple[dict[str, np.ndarray], np.ndarray]:
-        read = input_reader(u, "f_aero")
-        samples, end = integrate(self.p, state.tolist(), np.asarray(times, dtype=np.float64).tolist(),
-                                 lambda t: read(t)[0])
+    @reports_physics_errors
+    def advance(self, state: np.ndarray, times: np.ndarray, u: InputFunction) -> Advanced:
+        samples, end = integrate(self.p, state.tolist(), times, lambda ts: u(ts)["f_aero"])  # u read once
         return {"R": samples[:, 0:3].copy(), "V": samples[:, 3:6].copy()}, np.array(end, dtype=np.float64)

@@ -1,4 +1,4 @@
-"""m u'' = -k u + F(t), classical RK4 with ``idiv`` steps per sample, F interpolated at RK stages."""
+"""m u'' = -k u + F(t): the shared RK4 (``subsims.numerics.rk4``), ``idiv`` steps per sample, F read at RK stages."""
 
 from __future__ import annotations
 
@@ -6,33 +6,21 @@ from collections.abc import Callable
 
 import numpy as np
 
+from subsims.numerics import as_table, rk4
+
 
 def derivative(x: np.ndarray, force: float, m: float, k: float) -> np.ndarray:
     u, v = x
     return np.array([v, (force - k * u) / m])
 
 
-def rk4_step(f: Callable[[float, np.ndarray], np.ndarray], t: float, x: np.ndarray, h: float) -> np.ndarray:
-    k1 = f(t, x)
-    k2 = f(t + h / 2, x + h / 2 * k1)
-    k3 = f(t + h / 2, x + h / 2 * k2)
-    k4 = f(t + h, x + h * k3)
-    return x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-
-
 def integrate(
-    x0: np.ndarray, times: np.ndarray, force: Callable[[float], float], m: float, k: float, idiv: int
+    x0: np.ndarray, times: np.ndarray, force: Callable[[np.ndarray], np.ndarray], m: float, k: float, idiv: int
 ) -> np.ndarray:
-    """States (n, 2) = (u, v) at every sample time."""
-    out = np.empty((times.size, 2))
-    out[0] = x = x0
-    f = lambda t, x: derivative(x, force(t), m, k)  # noqa: E731
-    for i in range(times.size - 1):
-        h = (times[i + 1] - times[i]) / idiv
-        for j in range(idiv):
-            x = rk4_step(f, times[i] + j * h, x, h)
-        out[i + 1] = x
-    return out
+    """States (n, 2) = (u, v) at every sample time; ``force(ts)``: F at all the RK times (k,) in one call."""
+    states, _, _ = rk4(lambda t, x, f: derivative(x, f, m, k), np.asarray(x0, dtype=np.float64), times, idiv,
+                       lambda ts: as_table(force(ts), ts.size, 1, "F")[:, 0].tolist())
+    return np.array(states)
 
 
 def energy(u1: np.ndarray, v1: np.ndarray, u2: np.ndarray, v2: np.ndarray, m=1.0, k1=4 * np.pi**2,

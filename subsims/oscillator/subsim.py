@@ -32,5 +32,5 @@ class Mass(Subsim):
         return np.array([float(params["u0"]), float(params["v0"])])
 
     def advance(self, state: np.ndarray, times: np.ndarray, u: InputFunction):
-        x = integrate(state, times, lambda t: u(t)["F"][0], self.m, self.k, self.idiv)
+        x = integrate(state, times, lambda ts: u(ts)["F"], self.m, self.k, self.idiv)
         return {"u": x[:, :1], "v": x[:, 1:]}, x[-1]

@@ -2,7 +2,7 @@
 
 Three subsystems, each a stand-alone subsim: ``subsims.orbit`` (point-mass orbit), ``subsims.attitude``
 (rigid-body attitude and control) and ``subsims.aero`` (six-facet box aerodynamics). This package holds
-what they share: ``constants`` (spec §7), ``numerics`` (RK4 and 3-vectors), the vectorised coupling
+what they share: ``constants`` (spec §7), the vectorised coupling
 ``transforms``, the unified reference ``unified.run_unified`` (RK-U) and the paper's ``cases``.
 Spec: /work/shared/specs/recursive-feedback-satellite.md.
 """

@@ -11,21 +11,22 @@ from __future__ import annotations
 import copy
 from typing import Any
 
+from subsims.satellite import constants as C
+
 # spec §7.8: circular 300 km orbit, 30 deg inclination, start at the northernmost point; spec §7.2 mass
-ORBIT: dict[str, Any] = {"altitude_km": 300.0, "inclination_deg": 30.0, "mass": 10000.0, "idiv": 1}
+ORBIT: dict[str, Any] = {"altitude_km": C.ALTITUDE_KM, "inclination_deg": C.INCLINATION_DEG, "mass": C.MASS, "idiv": 1}
 
 # spec §7.6: rho 1.95e-11 kg/m^3 constant, Cd 2.25, 15 x 4 x 3 m box
-AERO: dict[str, Any] = {"rho": 1.95e-11, "cd": 2.25, "length": 15.0, "width": 4.0, "height": 3.0}
+AERO: dict[str, Any] = {"rho": C.RHO, "cd": C.CD, "length": C.BOX_LENGTH, "width": C.BOX_WIDTH, "height": C.BOX_HEIGHT}
 
 # spec §7.4: inertia diag(11250, 193125, 0.9*193125) kg m^2; spec §7.8: phi0 = omega0 = 0; spec §3.2: idiv 1
-_ATTITUDE: dict[str, Any] = {"inertia": [11250.0, 193125.0, 0.9 * 193125.0], "phi0": [0.0, 0.0, 0.0],
-                             "omega0": [0.0, 0.0, 0.0], "idiv": 1}
+_ATTITUDE: dict[str, Any] = {"inertia": [C.IXX, C.IYY, C.IZZ], "phi0": [0.0, 0.0, 0.0], "omega0": [0.0, 0.0, 0.0],
+                             "idiv": 1}
 
 # spec §7.4 r_cm (1.0, 0.1, 0.1) m; spec §7.6/§12.1 item 2: the listings' sign T + r_cm x F
-TRANSFER: dict[str, Any] = {"r_cm": [1.0, 0.1, 0.1], "physical": False}
+TRANSFER: dict[str, Any] = {"r_cm": list(C.R_CM), "physical": False}
 
-_FULL = {"a0": 1000.0, "a1": 100.0, "b0": 1000.0, "b1": 100.0, "c0": 1000.0, "c1": 100.0}
-
+_FULL = dict(C.GAINS_FULL)
 
 
 def _case(**attitude_gains: float) -> dict[str, dict[str, Any]]:
@@ -50,9 +51,10 @@ METHODS: dict[str, dict[str, Any]] = {
     "rku": {"dt": 0.1},
 }
 
-# spec §7.9: the REAL*4-promoted literals, for bit-level experiments only (merge into the dicts above)
+# spec §7.9: the REAL*4-promoted literals (constants.FORTRAN_LITERALS), for bit-level experiments only (merge
+# into the dicts above)
 FORTRAN_LITERALS: dict[str, dict[str, Any]] = {
-    "orbit": {"mu": 3.985140958624097e14},
-    "attitude": {"mu": 3.985140958624097e14, "inertia": [11250.0, 193125.0, 173812.4953955412]},
-    "aero": {"rho": 1.950000057260315e-11},
+    "orbit": {"mu": C.FORTRAN_LITERALS["gme"]},
+    "attitude": {"mu": C.FORTRAN_LITERALS["gme"], "inertia": [C.IXX, C.IYY, C.FORTRAN_LITERALS["izz"]]},
+    "aero": {"rho": C.FORTRAN_LITERALS["rho"]},
 }

@@ -12,7 +12,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from subsims.attitude.model import dcm321_batch
+from subsims.aero.model import torque_about_cm
+from subsims.numerics import dcm321_batch
 from subsims.satellite.constants import R_CM, REARTH_KM
 
 
@@ -68,9 +69,7 @@ def torque_to_cm(torque: np.ndarray, force: np.ndarray, r_cm: Sequence[float] = 
     r = np.asarray(r_cm, dtype=np.float64)
     if r.shape != (3,):
         raise ValueError(f"parameter 'r_cm' must be 3 numbers, got {r_cm!r}")
-    rxf = np.column_stack([r[1] * f[:, 2] - r[2] * f[:, 1], r[2] * f[:, 0] - r[0] * f[:, 2],
-                           r[0] * f[:, 1] - r[1] * f[:, 0]])
-    return t - rxf if physical else t + rxf
+    return np.column_stack(torque_about_cm(t.T, f.T, r, physical))  # column by column
 
 
 def limit_angles(phi: np.ndarray) -> np.ndarray:

@@ -14,10 +14,13 @@ from typing import Any
 import numpy as np
 
 from subsims.aero.model import AeroParams, facet_loads, torque_about_cm
-from subsims.attitude.model import AttitudeParams, EulerSingularityError, attitude_derivative, dcm321
+from subsims.attitude.model import AttitudeParams, EulerSingularityError, attitude_derivative
+from subsims.numerics import dcm321, matTvec, matvec, rk4, vecnorm
 from subsims.orbit.model import OrbitParams, orbit_derivative
 from subsims.satellite.constants import R_CM
-from subsims.satellite.numerics import as_int, matTvec, matvec, rk4_step, vecnorm
+from subsims.satellite.parameters import as_int
+
+CHUNK = 4096  # samples integrated per rk4 call (bounds the lists of Python floats held at once)
 
 
 def unified_loads(x: Sequence[float], aero: AeroParams, facets: tuple, r_cm: Sequence[float],
@@ -49,7 +52,7 @@ def run_unified(orbit_params: Mapping[str, Any], attitude_params: Mapping[str, A
 
     Parameters are the subsims' parameter dicts (``Orbit``, ``Attitude``, ``Aero``; their ``idiv`` is
     ignored: ``substeps`` RK4 steps are taken per ``dt``). ``r_cm``/``physical_torque`` as in
-    ``transforms.torque_to_cm``. Raises ``EulerSingularityError`` (a ``ModelError``) at phi_y = +-90 deg.
+    ``transforms.torque_to_cm``. Raises ``EulerSingularityError`` (a ``PhysicsError``) at phi_y = +-90 deg.
 
     Returns ``{"t": (n,), "orbit": {"R", "V"}, "attitude": {"phi", "omega", "omega_dot"},
     "aero": {"force", "torque"}}``, arrays (n, 3) at the samples, the same ports as the subsims'
@@ -65,27 +68,22 @@ def run_unified(orbit_params: Mapping[str, Any], attitude_params: Mapping[str, A
     facets = aero.facets
     r_cm = tuple(float(c) for c in r_cm)
 
-    def deriv(t: float, x: list[float]) -> list[float]:
+    def deriv(t: float, x: list[float], _: None) -> list[float]:
         try:
             return unified_derivative(x, op, ap, aero, facets, r_cm, physical_torque)
         except EulerSingularityError as e:
             raise EulerSingularityError(f"at t = {t:.9g} s: {e}") from None
 
     times = t_start + dt * np.arange(nsteps + 1)
-    tl = times.tolist()
     states = np.empty((nsteps + 1, 12))
     xdots = np.empty((nsteps + 1, 12))
     y = op.initial_state().tolist() + ap.initial_state().tolist()
-    f = deriv(tl[0], y)
-    states[0], xdots[0] = y, f
-    h = dt / substeps
-    for k in range(nsteps):
-        t0, t1 = tl[k], tl[k + 1]
-        for s in range(substeps):
-            te = t1 if s == substeps - 1 else t0 + (s + 1) * h
-            y = rk4_step(deriv, t0 + s * h, y, h, k1=f, t_end=te)
-            f = deriv(te, y)
-        states[k + 1], xdots[k + 1] = y, f
+    states[0] = y
+    for a in range(0, max(nsteps, 1), CHUNK):  # rksys: substeps RK4 steps of dt / substeps per sample
+        b = min(a + CHUNK, nsteps)
+        ys, fs, y = rk4(deriv, y, times[a:b + 1], substeps, h=dt / substeps, end_node=b == nsteps)
+        states[a + 1:b + 1] = ys[1:]
+        xdots[a:a + len(fs)] = fs
     force = np.empty((nsteps + 1, 3))
     torque = np.empty((nsteps + 1, 3))
     for k in range(nsteps + 1):

@@ -17,7 +17,8 @@ TIMES = np.linspace(0.0, 1.0, 11)
 def smooth_inputs(ports, scale=1.0):
     """u(t): every input a distinct smooth function of t."""
     def u(t):
-        return {name: scale * np.sin(t + 0.3 * np.arange(p.size) + i) for i, (name, p) in enumerate(ports.items())}
+        return {name: scale * np.sin(np.add.outer(t, 0.3 * np.arange(p.size)) + i)  # t (k,) -> (k, size)
+                for i, (name, p) in enumerate(ports.items())}
     return u
 
 
@@ -105,7 +106,8 @@ def test_pd_controller():
     assert c.algebraic and c.initial_state({"theta_cmd_deg": [0, 0, 10]}).size == 0
     euler = np.radians([[1.0, -2.0, 370.0], [0.0, 0.0, 10.0]])  # 370 deg: wrapped error 0 deg
     omega = np.array([[0.1, 0.0, -0.2], [0.0, 0.0, 0.0]])
-    out, _ = c.advance(np.empty(0), np.array([0.0, 1.0]), lambda t: {"euler123": euler[int(t)], "omega": omega[int(t)]})
+    at = lambda t: np.asarray(t, int)  # noqa: E731 - sample index of the times 0 and 1
+    out, _ = c.advance(np.empty(0), np.array([0.0, 1.0]), lambda t: {"euler123": euler[at(t)], "omega": omega[at(t)]})
     kp, kd = np.array(DEFAULT_CONTROL["kp"]), np.array(DEFAULT_CONTROL["kd"])
     np.testing.assert_allclose(out["tau0"][0], -(kp * np.radians([1, -2, 0]) + kd * omega[0]), atol=1e-12)
     np.testing.assert_allclose(out["tau0"][1], 0.0, atol=1e-12)
@@ -139,7 +141,7 @@ def test_closed_loop_reference_rigid_pd_slew_is_analytic():
 
 
 def interp(times, values):
-    return lambda t: np.array([np.interp(t, times, v) for v in values.T])
+    return lambda t: np.stack([np.interp(t, times, v) for v in values.T], axis=-1)  # t (k,) -> (k, m)
 
 
 def cosimulate_closed_loop(flex, ctrl, t_end, ns):

@@ -132,7 +132,7 @@ def rigid_attitude(J, w0, times, torque, h=0.01):
 
 
 def linear(times, values):
-    return lambda t: np.array([np.interp(t, times, v) for v in values.T])
+    return lambda t: np.stack([np.interp(t, times, v) for v in values.T], axis=-1)  # t (k,) -> (k, m)
 
 
 def run_stage(fb, y, J, w, times, control, tau):

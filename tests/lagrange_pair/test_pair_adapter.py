@@ -22,9 +22,10 @@ def zero_inputs(t: float) -> dict[str, np.ndarray]:
 
 
 def sampled(times: np.ndarray, values: Mapping[str, np.ndarray]) -> Callable[[float], dict[str, np.ndarray]]:
-    """u(t): linear interpolation of sampled signals (exact at the sample times)."""
+    """u(t): linear interpolation of sampled signals (exact at the sample times); t (k,) -> (k, size)."""
     def u(t: float) -> dict[str, np.ndarray]:
-        return {k: np.array([np.interp(t, times, v[:, j]) for j in range(v.shape[1])]) for k, v in values.items()}
+        return {k: np.stack([np.interp(t, times, v[:, j]) for j in range(v.shape[1])], axis=-1)
+                for k, v in values.items()}
     return u
 
 
@@ -183,8 +184,9 @@ def test_aero_subsim_fed_the_pair_kinematics_equals_built_in_aero() -> None:
     outputs = m.stack_outputs(pm, samples)
     exact = {float(t): k for k, t in enumerate(times)}
 
-    def u(t: float) -> dict[str, np.ndarray]:
-        return {name: outputs[name][exact[t]] for name in ("pos_B", "vel_B", "vel_C")}
+    def u(t: float) -> dict[str, np.ndarray]:  # only the sample times exist: t (k,) -> (k, 3)
+        return {name: outputs[name][np.vectorize(exact.__getitem__, otypes=[int])(t)]
+                for name in ("pos_B", "vel_B", "vel_C")}
 
     out, _ = LagrangePairAero().advance(np.zeros(0), times, u)
     fl = np.array([ev.FL for ev in samples])

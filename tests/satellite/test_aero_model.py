@@ -85,9 +85,10 @@ def test_adapter_contract_and_purity() -> None:
     times = np.linspace(0.0, 0.4, 5)
     seen: list[float] = []
 
-    def u(t: float) -> dict[str, np.ndarray]:
-        seen.append(t)
-        return {"R_body": np.array([6.6e6, 0.0, 0.0]), "V_body": np.array([100.0 * t, 7731.0, -50.0])}
+    def u(t: float | np.ndarray) -> dict[str, np.ndarray]:  # t (k,) -> (k, 3)
+        seen.extend(np.atleast_1d(t).tolist())
+        v_body = np.multiply.outer(t, [100.0, 0.0, 0.0]) + [0.0, 7731.0, -50.0]
+        return {"R_body": np.array([6.6e6, 0.0, 0.0]), "V_body": v_body}
 
     out1, end1 = sim.advance(state, times, u)
     out2, _ = sim.advance(state, times, u)

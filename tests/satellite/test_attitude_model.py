@@ -154,7 +154,8 @@ def test_torque_read_at_rk_stage_times() -> None:
     x0 = sim.initial_state({**ZERO_GAINS, "mu": 0.0, "idiv": 2})
     a, b = 0.3, 0.7
     times = np.array([2.0, 2.1, 2.2, 2.3, 2.4])
-    out, _ = sim.advance(x0, times, lambda t: {"R": np.zeros(3), "torque": np.array([a + b * t, 0.0, 0.0])})
+    x_axis = [1.0, 0.0, 0.0]
+    out, _ = sim.advance(x0, times, lambda t: {"R": np.zeros(3), "torque": np.multiply.outer(a + b * t, x_axis)})
     t0, tau = times[0], times - times[0]
     w = (a * tau + b * (times**2 - t0**2) / 2.0) / C.IXX
     phi = (a * tau**2 / 2.0 + b * ((times**3 - t0**3) / 6.0 - t0**2 * tau / 2.0)) / C.IXX
@@ -170,8 +171,9 @@ def test_adapter_contract_and_purity() -> None:
     state.setflags(write=False)
     r_i = np.array([5774354.283543313, 0.0, 3333825.0])
 
-    def u(t: float) -> dict[str, np.ndarray]:
-        return {"R": r_i + np.array([0.0, 7730.0 * t, 0.0]), "torque": np.array([1e-3, -2e-3, 5e-4 * t])}
+    def u(t: float | np.ndarray) -> dict[str, np.ndarray]:  # t (k,) -> (k, 3)
+        return {"R": r_i + np.multiply.outer(t, [0.0, 7730.0, 0.0]),
+                "torque": np.array([1e-3, -2e-3, 0.0]) + np.multiply.outer(t, [0.0, 0.0, 5e-4])}
 
     times = np.linspace(0.0, 0.4, 5)
     out1, end1 = sim.advance(state, times, u)

@@ -59,9 +59,9 @@ def test_force_read_at_rk_stage_times_idiv() -> None:
     a, b = np.array([0.5, -1.0, 2.0]), np.array([0.03, 0.01, -0.02])
     calls: list[float] = []
 
-    def u(t: float) -> dict[str, np.ndarray]:
-        calls.append(t)
-        return {"f_aero": a + b * t}
+    def u(t: float | np.ndarray) -> dict[str, np.ndarray]:  # t (k,) -> (k, 3)
+        calls.extend(np.atleast_1d(t).tolist())
+        return {"f_aero": a + np.multiply.outer(t, b)}
 
     times = np.array([10.0, 10.1, 10.2, 10.3, 10.4])
     out, end = sim.advance(x0, times, u)
@@ -98,8 +98,8 @@ def test_adapter_contract_and_purity() -> None:
     state.setflags(write=False)  # advance must not write into it
     times = np.linspace(0.0, 0.4, 5)
 
-    def u(t: float) -> dict[str, np.ndarray]:
-        return {"f_aero": np.array([-0.05, 0.01 * t, 0.002])}
+    def u(t: float | np.ndarray) -> dict[str, np.ndarray]:  # t (k,) -> (k, 3)
+        return {"f_aero": np.array([-0.05, 0.0, 0.002]) + np.multiply.outer(t, [0.0, 0.01, 0.0])}
 
     out1, end1 = sim.advance(state, times, u)
     out2, end2 = sim.advance(state, times, u)

@@ -1,0 +1,118 @@
+"""Model-side cost of the paper's satellite: one ``advance`` of each subsim, and whole in-process runs.
+
+    PYTHONPATH=. python benchmarks/satellite_models.py                 # both parts, case 1, 400 s, 3 repetitions
+    PYTHONPATH=. python benchmarks/satellite_models.py --runs 0        # advance timings only
+    PYTHONPATH=/path/to/other/tree python benchmarks/satellite_models.py --root /path/to/other/tree   # compare
+
+Times are CPU seconds of this process (``time.process_time``): on a shared machine they are far less noisy than
+wall time. Part 1 times ``advance`` of orbit, attitude and aero (case 1 parameters, 5 samples over 0.4 s, the
+runtime's own input function, linear interpolation), best of many. Part 2 runs ``cosim run case1 --inprocess`` for
+unified (RK-U), distributed (RF-D) and centralized (RF-C), interleaved and repeated, and reports per method the
+CPU time, the share of it spent inside the subsims' ``advance``, and the ratios to RK-U (medians).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+parser.add_argument("--root", type=Path, default=Path(os.environ.get("PYTHONPATH", ".").split(os.pathsep)[0]),
+                    help="the tree whose scenarios are run (default: the first PYTHONPATH entry)")
+parser.add_argument("--stop", type=float, default=400.0, help="problem time of each run, s")
+parser.add_argument("--runs", type=int, default=3, help="repetitions of the three runs (0: none)")
+parser.add_argument("--case", type=int, default=1)
+args = parser.parse_args()
+
+from cosim.runner import run_scenario  # noqa: E402
+from cosim.runtime import Runtime  # noqa: E402
+from cosim.scenario import load  # noqa: E402
+from cosim.unified import run_unified  # noqa: E402
+from subsims.aero.subsim import Aero  # noqa: E402
+from subsims.attitude.subsim import Attitude  # noqa: E402
+from subsims.orbit.subsim import Orbit  # noqa: E402
+from subsims.satellite.cases import CASES  # noqa: E402
+
+
+def cpu_per_call(fn, calls: int = 200, repeats: int = 15) -> float:
+    best = np.inf
+    for _ in range(repeats):
+        t0 = time.process_time()
+        for _ in range(calls):
+            fn()
+        best = min(best, time.process_time() - t0)
+    return best / calls
+
+
+def advance_costs() -> dict[str, float]:
+    times = np.linspace(0.0, 0.4, 5)
+    rng = np.random.default_rng(1)
+    params = CASES[f"case{args.case}"]
+    out = {}
+    for cls, key, sizes in ((Orbit, "orbit", {"f_aero": 3}), (Attitude, "attitude", {"R": 3, "torque": 3}),
+                            (Aero, "aero", {"R_body": 3, "V_body": 3})):
+        rt = Runtime(cls)
+        rt.configure(params[key])
+        scale = {"f_aero": 1e-3, "torque": 1e-4, "R": 7e6, "R_body": 7e6, "V_body": 7.7e3}
+        inputs = {k: rng.normal(size=(5, n)) * scale[k] for k, n in sizes.items()}
+        u = rt._input_function(times, inputs, "linear")
+        state, model = rt.state, rt.model
+        out[key] = cpu_per_call(lambda model=model, state=state, u=u: model.advance(state, times, u))
+    return out
+
+
+spent = {"cpu": 0.0, "calls": 0}
+
+
+def timed(advance):
+    def wrapper(self, *a, **k):
+        t0 = time.process_time()
+        try:
+            return advance(self, *a, **k)
+        finally:
+            spent["cpu"] += time.process_time() - t0
+            spent["calls"] += 1
+    return wrapper
+
+
+def runs() -> None:
+    for cls in (Orbit, Attitude, Aero):
+        cls.advance = timed(cls.advance)
+    scenario = load(args.root / "scenarios" / "satellite" / f"case{args.case}.toml")
+    rows: dict[str, list] = {m: [] for m in ("unified", "distributed", "centralized")}
+    with tempfile.TemporaryDirectory() as tmp:
+        for rep in range(args.runs):
+            for method in rows:
+                spent["cpu"], spent["calls"] = 0.0, 0
+                wall, cpu = time.perf_counter(), time.process_time()
+                output = Path(tmp) / f"{method}.csv"
+                if method == "unified":
+                    run_unified(scenario, stop=args.stop, output=output)
+                else:
+                    run_scenario(scenario, method=method, stop=args.stop, output=output, inprocess=True,
+                                 progress=False, log=lambda s: None)
+                wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
+                rows[method].append((cpu, spent["cpu"], spent["calls"], wall))
+                print(f"  rep {rep} {method:11s} cpu {cpu:6.3f} s, in advance {spent['cpu']:6.3f} s "
+                      f"({spent['calls']} calls), wall {wall:6.2f} s", flush=True)
+    med = {m: np.median(np.array(v), axis=0) for m, v in rows.items()}
+    rku = med["unified"][0]
+    print(f"medians over {args.runs} repetitions, case {args.case}, {args.stop:g} s (ratios: CPU time / RK-U's):")
+    for m, (cpu, adv, calls, wall) in med.items():
+        print(f"  {m:11s} cpu {cpu:6.3f} s = {cpu / rku:5.2f} x RK-U; in advance {adv:6.3f} s = {adv / rku:5.2f} x "
+              f"RK-U ({adv / cpu:4.0%} of the run, {adv / max(calls, 1) * 1e6:5.1f} us per call); "
+              f"rest {(cpu - adv) / rku:5.2f} x RK-U; wall {wall:6.2f} s")
+
+
+print(f"tree: {args.root.resolve()}  python {sys.version.split()[0]}")
+costs = advance_costs()
+print("one advance (5 samples, 0.4 s), CPU, best of 15 x 200:",
+      ", ".join(f"{k} {v * 1e6:.1f} us" for k, v in costs.items()), f"(sum {sum(costs.values()) * 1e6:.1f} us)")
+if args.runs:
+    runs()
