@@ -16,7 +16,7 @@ import zenoh
 from cosim.contract import SubsimError
 from cosim.protocol.keys import coordinator_alive_key, new_run_id
 from cosim.protocol.transport.client import RemoteHandle
-from cosim.protocol.transport.session import open_router
+from cosim.protocol.transport.session import client_config, open_router
 
 
 def subsim_command(
@@ -72,9 +72,13 @@ class Bus:
         bus._token = session.liveliness().declare_token(coordinator_alive_key(bus.run))
         return bus
 
+    def open_requests(self) -> zenoh.Session:
+        """A client session of this router: each handle sends its requests from one of these (RemoteHandle)."""
+        return zenoh.open(client_config(self.endpoint, 10.0))
+
     def attach(self, name: str, timeout: float = 60.0, wait: float = 10.0) -> RemoteHandle:
         """Handle to a subsim that is (or soon will be) serving ``name`` in this run."""
-        handle = RemoteHandle(self.session, self.run, name, timeout=timeout)
+        handle = RemoteHandle(self.session, self.run, name, timeout=timeout, requests=self.open_requests)
         try:
             handle.wait_ready(wait)
         except Exception:
@@ -100,7 +104,7 @@ class Bus:
             stdout=subprocess.DEVNULL if quiet else None,
             stderr=subprocess.DEVNULL if quiet else None,
         )
-        handle = RemoteHandle(self.session, self.run, name, timeout=timeout)
+        handle = RemoteHandle(self.session, self.run, name, timeout=timeout, requests=self.open_requests)
         proc = SubsimProcess(name, popen, handle)
         self.processes.append(proc)
         try:

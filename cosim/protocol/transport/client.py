@@ -14,19 +14,49 @@ from cosim.handles import SubsimHandle
 from cosim.protocol.keys import alive_key, check_name, rpc_key
 from cosim.protocol.messages import ErrorInfo, decode_reply, encode_request
 
+NONE = zenoh.ConsolidationMode.NONE
+
+# Every query leaves a task in the session that sent it: the task sleeps for the query's whole timeout
+# and ends early only when that session closes, not when the query is answered (zenoh 1.x,
+# zenoh/src/api/session.rs, Session::query; eclipse-zenoh/zenoh#877 was the same bug in 0.11). Measured
+# with eclipse-zenoh 1.10.2: 1.1 KB of resident memory per request until its timeout, so a coordinator
+# sending 2,000 requests a second with a 120 s timeout would hold about 260 MB for answered requests.
+# A handle therefore sends from a client session of its own (opened by ``requests``) and replaces it
+# every RENEW_EVERY requests, between requests: memory stays within RENEW_EVERY such tasks (about 5 MB
+# per subsim), at the cost of one more hop (this process's router) per request and a new session (about
+# 10 ms) every RENEW_EVERY requests.
+RENEW_EVERY = 5000
+
 
 class RemoteHandle(SubsimHandle):
     """Zenoh request/reply to ``cosim/<run>/<name>/rpc``; liveliness reports a dead process at once."""
 
-    def __init__(self, session: zenoh.Session, run: str, name: str, timeout: float = 60.0) -> None:
+    def __init__(
+        self,
+        session: zenoh.Session,
+        run: str,
+        name: str,
+        timeout: float = 60.0,
+        requests: Callable[[], zenoh.Session] | None = None,
+        renew_every: int = RENEW_EVERY,
+    ) -> None:
+        """``session`` watches the subsim's liveliness. ``requests`` opens a client session of the router
+        from which the handle sends its requests, replaced every ``renew_every`` requests (see
+        :data:`RENEW_EVERY`); without it, requests go from ``session`` and their memory outlives them."""
         self.session, self.run, self.name = session, run, check_name(name, "subsim name")
         self._key = rpc_key(run, name)
         self.timeout = timeout
+        self._open_requests, self._renew_every = requests, renew_every
+        self._requests: zenoh.Session | None = None  # the session of our own, once opened
+        self._sent = self._in_flight = 0
         # A declared querier costs about 35 us less per request than session.get. Its timeout is fixed
         # at declaration, and a querier declared late may not see the subsim yet, so a request made
         # after ``timeout`` changed goes through session.get instead.
-        self._querier = session.declare_querier(self._key, timeout=timeout, consolidation=zenoh.ConsolidationMode.NONE)
-        self._querier_timeout = timeout
+        self._querier: zenoh.Querier | None = None
+        self._querier_timeout: float | None = None
+        if requests is None:
+            self._querier = session.declare_querier(self._key, timeout=timeout, consolidation=NONE)
+            self._querier_timeout = timeout
         self._alive = threading.Event()
         self._died = threading.Event()
         self._liveliness = session.liveliness().declare_subscriber(
@@ -66,15 +96,43 @@ class RemoteHandle(SubsimHandle):
         if self._died.is_set():
             raise SubsimDied("no_responder", "the subsim process is gone (liveliness lost)", self.name, cmd)
         payload = encode_request(cmd, args)
-        if self.timeout == self._querier_timeout:
+        if self._open_requests is not None and self._in_flight == 0 and (
+            self._requests is None or self._sent >= self._renew_every
+        ):
+            self._renew()
+        source = self._requests if self._requests is not None else self.session
+        if self.timeout == self._querier_timeout and self._querier is not None:
             replies = self._querier.get(payload=payload)
         else:
-            replies = self.session.get(
-                self._key, payload=payload, timeout=self.timeout, consolidation=zenoh.ConsolidationMode.NONE
-            )
+            replies = source.get(self._key, payload=payload, timeout=self.timeout, consolidation=NONE)
+        self._sent += 1
+        self._in_flight += 1
         return lambda: self._finish(cmd, replies)
 
+    def _renew(self) -> None:
+        """Send from now on from a fresh client session; close the old one, which frees its queries' tasks."""
+        fresh = self._open_requests()  # type: ignore[misc]
+        try:
+            querier = fresh.declare_querier(self._key, timeout=self.timeout, consolidation=NONE)
+            # declarations reach a new session a moment after it opens (zenoh-notes P2)
+            deadline = time.monotonic() + min(self.timeout, 10.0)
+            while not querier.matching_status.matching and not self._died.is_set() and time.monotonic() < deadline:
+                time.sleep(0.001)
+        except BaseException:
+            fresh.close()
+            raise
+        old, self._requests = self._requests, fresh
+        self._querier, self._querier_timeout, self._sent = querier, self.timeout, 0
+        if old is not None:
+            old.close()
+
     def _finish(self, cmd: str, replies: Any) -> dict:
+        try:
+            return self._wait(cmd, replies)
+        finally:
+            self._in_flight -= 1
+
+    def _wait(self, cmd: str, replies: Any) -> dict:
         # blocks until the reply or the end of the request: a waiting coordinator leaves the cores to the
         # subsims (a polling wait was 40-60 us faster per round trip but burned a core the subsims need)
         reply = next(iter(replies), None)
@@ -97,8 +155,14 @@ class RemoteHandle(SubsimHandle):
         raise SubsimDied("no_responder", reason, self.name, cmd)
 
     def close(self) -> None:
-        for entity in (self._querier, self._liveliness):
+        """Undeclare and close what the handle opened; later requests (a last ``shutdown``) use ``session``."""
+        entities = (self._querier, self._liveliness, self._requests)
+        self._open_requests, self._requests, self._querier, self._querier_timeout = None, None, None, None
+        for entity in entities:
             try:
-                entity.undeclare()
+                if isinstance(entity, zenoh.Session):
+                    entity.close()
+                elif entity is not None:
+                    entity.undeclare()
             except Exception:
                 pass
