@@ -147,10 +147,11 @@ def in_situ(bus: Bus, warmup: int, count: int) -> tuple[list[float], list[float]
 
 
 class BareClient:
-    """The coordinator half of (c): exactly what RemoteHandle does, minus encoding and decoding."""
+    """The coordinator half of (c): exactly what RemoteHandle does, minus encoding and decoding (and, like a
+    RemoteHandle, it sends from a client session of the router, not from the router's own session)."""
 
     def __init__(self, bus: Bus, reply_size: int) -> None:
-        self.session, self.key = bus.session, bare_key(bus.run)
+        self.session, self.key = bus.open_requests(), bare_key(bus.run)
         self.popen = subprocess.Popen(
             [sys.executable, str(Path(__file__).resolve()), "--bare-server", bus.endpoint, bus.run, str(reply_size)]
         )
@@ -184,6 +185,8 @@ class BareClient:
             except subprocess.TimeoutExpired:
                 self.popen.kill()
                 self.popen.wait()
+        finally:
+            self.session.close()
 
 
 # --- measurement ---------------------------------------------------------------------------------------
