@@ -3,6 +3,7 @@
     python benchmarks/slow_link.py                        # case 1, RF-D and RF-C, 200 s, 0.5 ms each way
     python benchmarks/slow_link.py --delay-ms 2 --stop 100
     python benchmarks/slow_link.py --delay-ms 0.5 1 2     # several delays
+    python benchmarks/slow_link.py --repeat 3             # median of 3 interleaved runs per link
     python benchmarks/slow_link.py relay --target tcp/127.0.0.1:7447 --delay-ms 0.5   # only the relay
 
 The relay (:class:`DelayRelay`) is a TCP forwarder on 127.0.0.1: each connection a subsim opens to it is
@@ -271,6 +272,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--delay-ms", type=float, nargs="+", default=[0.5], help="delay each way, ms")
     p.add_argument("--stop", type=float, default=200.0, help="problem time of each run, s")
     p.add_argument("--methods", nargs="+", default=["distributed", "centralized"])
+    p.add_argument("--repeat", type=int, default=1, help="runs per link, interleaved; the median wall time counts")
     args = p.parse_args(argv)
     runs = [(ROOT / "scenarios" / "satellite" / "case1.toml", m) for m in args.methods]
     auto = ROOT / "scenarios" / "satellite" / "case1-auto.toml"
@@ -282,10 +284,15 @@ def main(argv: list[str] | None = None) -> int:
           + ", ".join(f"{d:g} ms" for d in [0.0, *args.delay_ms]))
     print(f"{'scenario':14s} {'method':12s} {'link':>9s} {'wall s':>8s} {'requests':>9s} {'req/sim s':>10s} "
           f"{'stages':>7s} {'added wall per request':>23s} {'added wall per sim s':>21s}")
+    links = [None, 0.0, *[d / 1e3 for d in args.delay_ms if d > 0]]
     for path, method in runs:
+        results: dict[float | None, list[dict]] = {link: [] for link in links}
+        for _ in range(args.repeat):  # interleaved, so that load drifts hit every link alike
+            for link in links:
+                results[link].append(run_once(path, method, args.stop, link))
         reference = None
-        for delay in [None, 0.0, *[d / 1e3 for d in args.delay_ms if d > 0]]:
-            r = run_once(path, method, args.stop, delay)
+        for delay in links:
+            r = sorted(results[delay], key=lambda x: x["wall_s"])[len(results[delay]) // 2]  # the median run
             link = "direct" if delay is None else f"{delay * 1e3:g} ms"
             line = (f"{path.stem:14s} {r['method']:12s} {link:>9s} {r['wall_s']:8.1f} {r['requests']:9d} "
                     f"{r['requests'] / r['span']:10.1f} {r['stages']:7.2f}")
