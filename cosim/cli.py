@@ -251,6 +251,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 1
     except SubsimError as exc:
         print(f"cosim: run stopped: {exc}", file=sys.stderr)
+        if exc.traceback:  # a bug in a model: its own frames, file and line, as the subsim saw them
+            print(f"the model's traceback (in subsim {exc.subsim!r}):\n{exc.traceback.rstrip()}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         print("cosim: interrupted; results up to the last committed interval are kept", file=sys.stderr)

@@ -4,7 +4,8 @@
 
 The checker is the coordinator: it opens a Zenoh router listening on ENDPOINT (``tcp/127.0.0.1:0``
 picks a free port, printed on stderr) with run id RUN, waits for the subsim NAME to appear (start it
-with ``--connect <endpoint> --run RUN --name NAME``, before or after), then sends it well-formed and
+with ``--connect <endpoint> --run RUN --name NAME`` and the two environment variables it prints, the
+subsim's key and the router login, as ``cosim run`` gives them to an external subsim), then sends it well-formed and
 malformed requests and checks every reply: envelope and result types, error codes, that nothing
 committed changes on a failed request, determinism, commit / rollback / stale-trial / set_state
 semantics, and that ``shutdown`` ends it. Give it a freshly started subsim: it configures it (with
@@ -29,7 +30,15 @@ import numpy as np
 from cosim.contract import ERROR_CODES, PROTOCOL_VERSION, ProtocolError, SubsimError
 from cosim.launch import Bus
 from cosim.protocol.keys import alive_key, check_name, rpc_key
-from cosim.protocol.messages import REQUESTS, ErrorInfo, decode_reply, encode_request
+from cosim.protocol.messages import (
+    REQUESTS,
+    ErrorInfo,
+    decode_reply,
+    encode_request,
+    next_seq,
+    open_reply,
+    seal_request,
+)
 from cosim.protocol.wire import encode_array
 
 Send = Callable[[bytes], "bytes | None"]  # request payload -> reply payload (None: no reply at all)
@@ -275,6 +284,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     with Bus.open(args.endpoint, run=args.run) as bus:
         print(f"cosim.conformance: listening on {bus.endpoint}, run {bus.run}; start the subsim with "
               f"--connect {bus.endpoint} --run {bus.run} --name {args.name}", file=sys.stderr, flush=True)
+        env = " ".join(f"{k}={v}" for k, v in bus.subsim_env(args.name).items())
+        print(f"cosim.conformance: and in its environment (its key and the router login): {env}", file=sys.stderr,
+              flush=True)
         try:
             bus.attach(args.name, wait=args.wait)
         except SubsimError as exc:
@@ -282,9 +294,17 @@ def main(argv: Sequence[str] | None = None) -> int:
             return 2
         bus.attached.clear()  # the checker sends shutdown itself, as a check
 
+        key = bus.key(args.name)
+
         def send(payload: bytes) -> bytes | None:
-            replies = list(bus.session.get(rpc_key(bus.run, args.name), payload=payload, timeout=30.0))
-            return None if not replies or replies[0].ok is None else replies[0].ok.payload.to_bytes()
+            """Sealed with the subsim's key (docs/protocol.md 4.1); a reply without its tag counts as none."""
+            seq = next_seq()
+            replies = list(bus.session.get(rpc_key(bus.run, args.name), payload=seal_request(key, seq, payload),
+                                           timeout=30.0))
+            if not replies or replies[0].ok is None:
+                return None
+            body = open_reply(key, seq, replies[0].ok.payload.to_bytes())
+            return None if body is None else bytes(body)
 
         checker = run_checks(send, args.name, args.params, args.interval, args.samples)
         _check_shutdown(checker, bus, args.name)

@@ -24,6 +24,8 @@ ERROR_CODES: dict[str, str] = {
     "stale_trial": "the latest trial did not start from the current committed state",
     "not_in_history": "rollback target time is not in the committed history",
     "model_error": "the model could not advance (e.g. a singularity); nothing committed changed",
+    "model_exception": "the model raised an unexpected exception (a bug in it); the error carries its traceback; "
+                       "nothing committed changed",
     "internal": "unexpected failure inside the subsim; nothing committed changed",
     "too_large": "the request is larger than the subsim's request cap; refused before decoding",
     "busy": "the subsim's request queue is full; the request was refused, nothing changed; retry later",
@@ -36,10 +38,11 @@ ERROR_CODES: dict[str, str] = {
 class CosimError(Exception):
     """An error with a protocol code; the runtime turns it into an error reply."""
 
-    def __init__(self, code: str, message: str) -> None:
+    def __init__(self, code: str, message: str, traceback: str | None = None) -> None:
         super().__init__(message)
         self.code = code
         self.message = message
+        self.traceback = traceback  # the model's own frames, for a model_exception
 
 
 class ProtocolError(CosimError):
@@ -49,12 +52,13 @@ class ProtocolError(CosimError):
 class SubsimError(RuntimeError):
     """Coordinator side: a command failed. Names the subsim, the command and the cause."""
 
-    def __init__(self, code: str, message: str, subsim: str, command: str) -> None:
+    def __init__(self, code: str, message: str, subsim: str, command: str, traceback: str | None = None) -> None:
         super().__init__(f"{subsim}.{command}: [{code}] {message}")
         self.code = code
         self.message = message
         self.subsim = subsim
         self.command = command
+        self.traceback = traceback  # the model's traceback as the subsim formatted it (model_exception)
 
 
 class SubsimDied(SubsimError):

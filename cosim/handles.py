@@ -133,7 +133,7 @@ class InProcessHandle(SubsimHandle):
         try:
             result = self.runtime.handle(cmd, args)
         except CosimError as exc:
-            error = SubsimError(exc.code, exc.message, self.name, cmd)
+            error = SubsimError(exc.code, exc.message, self.name, cmd, exc.traceback)
 
             def fail() -> dict:  # raised when the caller collects, as a remote error would be
                 raise error

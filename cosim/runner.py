@@ -127,7 +127,8 @@ def open_session(
             try:
                 session.descriptions[name] = handles[name].configure(spec.params, t0=scenario.start)
             except SubsimError as exc:
-                raise ScenarioError(f"{scenario.path}: [subsims.{name}.params] {exc.message}") from None
+                trace = f"\nthe model's traceback:\n{exc.traceback.rstrip()}" if exc.traceback else ""
+                raise ScenarioError(f"{scenario.path}: [subsims.{name}.params] {exc.message}{trace}") from None
         session.plans = {method: build_plan(scenario, session.descriptions, method) for method in scenario.settings}
         signals = {f"{n}.{p}" for n, d in session.descriptions.items() for p in [*d.inputs, *d.outputs]}
         for name in scenario.settings_for().tolerances:

@@ -9,6 +9,7 @@ from __future__ import annotations
 import copy
 import math
 import os
+import traceback
 from collections import deque
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -28,6 +29,14 @@ class _Trial:
     epoch: int  # committed epoch the trial started from
     end_time: float
     end_state: np.ndarray
+
+
+def _model_exception(where: str, exc: BaseException) -> CosimError:
+    """A model's unexpected exception as an error that names it in one line and carries the model's own frames
+    (the runtime's frame that called the model is left out)."""
+    tb = exc.__traceback__.tb_next if exc.__traceback__ is not None else None
+    text = "".join(traceback.format_exception(type(exc), exc, tb))
+    return CosimError("model_exception", f"{where}() raised {type(exc).__name__}: {exc}", text)
 
 
 def _readonly(a: np.ndarray) -> np.ndarray:
@@ -135,6 +144,8 @@ class Runtime:
             raise CosimError("model_error", f"configure: {exc}") from None
         except (ValueError, KeyError, TypeError) as exc:
             raise CosimError("bad_value", f"configure: bad parameter: {exc}") from None
+        except Exception as exc:
+            raise _model_exception("initial_state", exc) from None
         state = self._check_state(state, None, "initial_state() for these parameters gave a state that")
         self.model, self.inputs, self.outputs = model, inputs, outputs
         self._set_committed(t0, state)
@@ -167,7 +178,7 @@ class Runtime:
         except ModelError as exc:
             raise CosimError("model_error", f"at t in [{times[0]}, {times[-1]}]: {exc}") from None
         except Exception as exc:
-            raise CosimError("internal", f"advance raised {type(exc).__name__}: {exc}") from None
+            raise _model_exception("advance", exc) from None
         checked = self._check_outputs(outputs, times)
         end_state = self._check_state(end_state, state.size, "advance() returned end state", from_model=True)
         if trial is not None:

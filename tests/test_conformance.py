@@ -22,6 +22,7 @@ import sys
 import numpy as np
 import zenoh
 
+from cosim.protocol.security import ClientSecurity
 from cosim.protocol.transport.server import CommandServer
 from cosim.protocol.transport.session import client_config
 from cosim.runtime import Runtime
@@ -43,8 +44,9 @@ class BrokenRuntime(Runtime):
 
 
 endpoint, run, name = sys.argv[1:4]
-session = zenoh.open(client_config(endpoint, 10.0))
-server = CommandServer(session, run, BrokenRuntime(Integrator, name=name))
+security = ClientSecurity.from_env()  # the key and login the checker printed, as any subsim reads them
+session = zenoh.open(client_config(endpoint, 10.0, security=security))
+server = CommandServer(session, run, BrokenRuntime(Integrator, name=name), key=security.key)
 try:
     server.serve()
 finally:
@@ -68,11 +70,13 @@ def check(procs: list, name: str, start_subsim: list[str], *options: str, env: d
     checker = subprocess.Popen([sys.executable, "-m", "cosim.conformance", "tcp/127.0.0.1:0", "conf-run", name,
                                 "--wait", "30", *options], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     procs.append(checker)
-    first = checker.stderr.readline()
+    first, second = checker.stderr.readline(), checker.stderr.readline()
     assert "listening on tcp/127.0.0.1:" in first, first
     endpoint = first.split("listening on ")[1].split(",")[0]
-    procs.append(subprocess.Popen([arg.replace("ENDPOINT", endpoint) for arg in start_subsim], env=env,
-                                  stderr=subprocess.DEVNULL))
+    secrets = dict(word.split("=", 1) for word in second.split(": ")[-1].split())  # the subsim's key and login
+    assert set(secrets) == {"COSIM_SECRET", "COSIM_ZENOH_AUTH"}, second
+    procs.append(subprocess.Popen([arg.replace("ENDPOINT", endpoint) for arg in start_subsim],
+                                  env={**(env or os.environ), **secrets}, stderr=subprocess.DEVNULL))
     out, err = checker.communicate(timeout=300)
     assert f"{name}: " in err and "violation(s)" in err, err
     return checker.returncode, out

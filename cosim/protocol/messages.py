@@ -100,6 +100,7 @@ ERROR_FIELDS: Fields = {
     "message": (t_str, True),
     "subsim": (t_str, True),
     "command": (t_str, True),
+    "traceback": (t_str, False),
 }
 
 
@@ -115,6 +116,7 @@ class ErrorInfo:
     message: str
     subsim: str
     command: str
+    traceback: str | None = None
 
 
 def _to_wire(value: Any) -> Any:
@@ -191,8 +193,10 @@ def encode_result(result: dict[str, Any]) -> bytes:
     return pack({"v": PROTOCOL_VERSION, "ok": True, "result": _to_wire(result)})
 
 
-def encode_error(code: str, message: str, subsim: str, command: str) -> bytes:
+def encode_error(code: str, message: str, subsim: str, command: str, traceback: str | None = None) -> bytes:
     err = {"code": code, "message": message, "subsim": subsim, "command": command}
+    if traceback is not None:
+        err["traceback"] = traceback
     return pack({"v": PROTOCOL_VERSION, "ok": False, "error": err})
 
 
@@ -204,7 +208,7 @@ def decode_reply(cmd: str, payload: bytes) -> dict[str, Any] | ErrorInfo:
         ok = t_bool(msg.get("ok"), "ok")
         if not ok:
             e = check_fields(msg.get("error"), ERROR_FIELDS, "error", strict=False)
-            return ErrorInfo(e["code"], e["message"], e["subsim"], e["command"])
+            return ErrorInfo(e["code"], e["message"], e["subsim"], e["command"], e.get("traceback"))
         return check_fields(t_any_map(msg.get("result"), "result"), RESULTS[cmd], "result", strict=False)
     except ProtocolError:
         raise

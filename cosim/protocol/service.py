@@ -47,7 +47,7 @@ def answer(runtime: Runtime, payload: bytes | memoryview) -> bytes:
     except CosimError as exc:
         if cmd == "?":
             cmd = request_command(payload)
-        return encode_error(exc.code, exc.message, runtime.name, cmd)
+        return encode_error(exc.code, exc.message, runtime.name, cmd, exc.traceback)
     except Exception as exc:  # last line of defence: the process must survive any request
         log.exception("unexpected failure serving %s", cmd)
         return encode_error("internal", f"{type(exc).__name__}: {exc}", runtime.name, cmd)

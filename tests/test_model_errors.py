@@ -1,0 +1,110 @@
+"""A bug in a user's model is reported as its own error code, with the model's own traceback (file and line)
+under a one-line summary; nothing committed changes. Runs the CLI as a process, over Zenoh and in-process."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cosim.contract import SubsimError
+from cosim.handles import InProcessHandle
+
+BUGGY = '''
+import numpy as np
+from cosim import Port, Subsim
+
+
+class Buggy(Subsim):
+    inputs = {"u": Port(1)}
+    outputs = {"x": Port(1)}
+
+    def initial_state(self, params):
+        if params.get("crash_at_start"):
+            return np.array([1.0 / (int(params["crash_at_start"]) - 1)])  # a bug: Python float division by zero
+        return np.array([1.0])
+
+    def advance(self, state, times, u):
+        out = [state.copy()]
+        x = state.copy()
+        for t in times[1:]:
+            x = x + helper(t)
+            out.append(x.copy())
+        return {"x": np.array(out)}, x
+
+
+def helper(t):
+    if t > 0.15:
+        raise ZeroDivisionError("the model divided by zero")
+    return np.zeros(1)
+'''
+
+SCENARIO = '''
+stop = 0.4
+[coupling]
+method = "distributed"
+interval = 0.1
+samples = 3
+[subsims.a]
+model = "buggy:Buggy"
+params = {}
+[subsims.b]
+model = "buggy:Buggy"
+[[couplings]]
+to = "a.u"
+from = "b.x"
+[[couplings]]
+to = "b.u"
+from = "a.x"
+'''
+
+
+@pytest.fixture
+def project(tmp_path: Path) -> Path:
+    (tmp_path / "buggy.py").write_text(BUGGY)
+    (tmp_path / "s.toml").write_text(SCENARIO)
+    return tmp_path
+
+
+@pytest.mark.parametrize("where", ["zenoh", "inprocess"])
+def test_a_model_exception_shows_its_own_traceback_under_one_line(project: Path, where: str) -> None:
+    cmd = [sys.executable, "-m", "cosim.cli", "run", "s.toml", "--quiet", "--restarts", "0",
+           *(["--inprocess"] if where == "inprocess" else [])]
+    done = subprocess.run(cmd, cwd=project, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 1
+    lines = done.stderr.strip().splitlines()  # (launched subsims also say on stderr when they start and stop)
+    at = next(i for i, line in enumerate(lines) if line.startswith("cosim: run stopped"))
+    first, rest = lines[at], lines[at + 1:]
+    assert first.startswith("cosim: run stopped: a.run_interval: [model_exception] advance() raised ZeroDivisionError")
+    assert "the model divided by zero" in first
+    text = "\n".join(rest)
+    assert "Traceback" not in first and "the model's traceback (in subsim 'a')" in text
+    assert f'File "{project / "buggy.py"}", line' in text and "in helper" in text and "in advance" in text
+    assert "cosim/runtime.py" not in text  # the model's frames, not the framework's
+
+
+def test_an_exception_in_initial_state_names_the_params_key_and_shows_the_traceback(project: Path) -> None:
+    (project / "s.toml").write_text(SCENARIO.replace("params = {}", "params = { crash_at_start = 1 }"))
+    done = subprocess.run([sys.executable, "-m", "cosim.cli", "run", "s.toml", "--inprocess", "--quiet"],
+                          cwd=project, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2
+    assert "[subsims.a.params] initial_state() raised ZeroDivisionError" in done.stderr
+    assert f'File "{project / "buggy.py"}", line' in done.stderr and "in initial_state" in done.stderr
+
+
+def test_a_model_exception_changes_nothing_committed(project: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.syspath_prepend(str(project))
+    from buggy import Buggy
+
+    h = InProcessHandle(Buggy(), "a")
+    h.configure({})
+    before = h.get_state()
+    with pytest.raises(SubsimError) as err:
+        h.run_interval(np.linspace(0.0, 0.3, 4), {"u": np.zeros((4, 1))})
+    assert err.value.code == "model_exception" and "in helper" in err.value.traceback
+    after = h.get_state()
+    assert (after.time, after.state.tobytes()) == (before.time, before.state.tobytes())
+    assert h.status()["has_trial"] is False
