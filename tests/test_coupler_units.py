@@ -28,6 +28,55 @@ def test_convrg_is_relative_to_the_newest_span_or_absolute() -> None:
     np.testing.assert_array_equal(ok, [True, False])
 
 
+def test_convrg_span_is_the_newest_stages_per_channel_and_bounds_are_inclusive() -> None:
+    """Cases that tell the paper's ``convrg`` from plausible wrong versions of it (all values exact in binary).
+
+    Each row is (new, old, rel, abs, expected pass) for one channel; the perturbation sits on an END
+    sample, so the newest and the previous stage have different spans, and every channel sits on an
+    offset, so a "span" of max|new| or of max-min over all channels would differ too.
+    Wrong versions each case catches: span of the previous stage (a, b); rel and abs swapped (c, d);
+    ``<`` instead of ``<=`` (a, e); span over all channels instead of per channel (f, with a);
+    max |new| or mean |new| instead of the span (a, b, g); ``and`` instead of ``or`` (d); the span
+    of |new - old| instead of the span of new (a).
+    """
+    base = 100.0
+    cases = [
+        # a: residual 1, newest span 4, previous span 3: 1 <= 0.25*4 passes (on the boundary)
+        ([0.0, 1.0, 4.0], [0.0, 1.0, 3.0], 0.25, 0.0, True),
+        # b: residual 1, newest span 3, previous span 4: 1 > 0.25*3 fails
+        ([0.0, 1.0, 3.0], [0.0, 1.0, 4.0], 0.25, 0.0, False),
+        # c: rel alone would pass (1 <= 0.5*4), abs alone would not (1 > 0.5): passes through rel
+        ([0.0, 2.0, 4.0], [1.0, 2.0, 4.0], 0.5, 0.5, True),
+        # d: abs alone passes (0.5 <= 0.5, boundary), rel alone does not (0.5 > 0.0625*4)
+        ([0.0, 2.0, 4.0], [0.5, 2.0, 4.0], 0.0625, 0.5, True),
+        # e: just over both bounds fails
+        ([0.0, 2.0, 4.0], [0.0, 2.0, 4.0 + 2.0**-20], 2.0**-23, 2.0**-21, False),
+        # f: a constant channel (span 0) with a residual above abs fails whatever the other channels' span
+        ([5.0, 5.0, 5.0], [5.0, 5.0, 5.0 + 2.0**-10], 0.5, 2.0**-11, False),
+        # g: a signal near a large offset: span 2, not max|new| = 102 (before the offset is added: 2)
+        ([0.0, 1.0, 2.0], [0.0, 1.0, 2.5], 0.125, 0.0, False),
+    ]
+    new = base + np.column_stack([np.array(c[0]) for c in cases])
+    old = base + np.column_stack([np.array(c[1]) for c in cases])
+    expected_residual = np.abs(np.column_stack([np.subtract(c[0], c[1]) for c in cases])).max(axis=0)
+    for j, (_, _, rel, ab, ok) in enumerate(cases):
+        residual, passed = convrg(new[:, [j]], old[:, [j]], Tolerance(rel=rel, abs=ab))
+        assert residual[0] == expected_residual[j], (j, residual)
+        assert bool(passed[0]) is ok, f"case {'abcdefg'[j]}: expected {'pass' if ok else 'fail'}"
+    # all channels at once with one tolerance: each channel is judged on its own span
+    residual, passed = convrg(new[:, [0, 5]], old[:, [0, 5]], Tolerance(rel=0.25, abs=0.0))
+    np.testing.assert_array_equal(residual, [1.0, 2.0**-10])
+    np.testing.assert_array_equal(passed, [True, False])  # a global span (4) would pass channel f
+    residual, passed = convrg(new[:, [0, 1]], old[:, [0, 1]], Tolerance(rel=0.25, abs=0.0))
+    np.testing.assert_array_equal(passed, [True, False])
+    # the same through check(): per-signal tolerances and the converged flag
+    result = check({"s.a": new[:, [0]], "s.b": new[:, [1]]}, {"s.a": old[:, [0]], "s.b": old[:, [1]]},
+                   Tolerance(rel=0.25, abs=0.0))
+    assert result.failing == ["s.b"] and not result.converged and result.largest == 1.0
+    assert check({"s.b": new[:, [1]]}, {"s.b": old[:, [1]]}, Tolerance(0.25, 0.0),
+                 {"s.b": Tolerance(1 / 3 + 2.0**-50, 0.0)}).converged  # 1 <= rel * 3
+
+
 def test_check_uses_per_signal_tolerances_and_names_failures() -> None:
     new = {"a.x": np.array([[0.0], [1.0]]), "b.y": np.array([[0.0], [1000.0]])}
     old = {"a.x": np.array([[0.0], [1.001]]), "b.y": np.array([[0.0], [1000.5]])}
