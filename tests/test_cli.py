@@ -81,6 +81,7 @@ def popen_cleanup() -> Iterator[list[subprocess.Popen]]:
         p.wait()
 
 
+@pytest.mark.zenoh
 def test_run_writes_results_and_diagnostics_and_leaves_no_process(tmp_path: Path) -> None:
     out = tmp_path / "osc.csv"
     tag, env = tagged()
@@ -106,6 +107,7 @@ def test_npz_output_by_suffix_in_process(tmp_path: Path) -> None:
     assert cols[0] == "time" and data.shape == (9, 5) and done.stderr == ""  # 2 intervals x 4 samples + the end
 
 
+@pytest.mark.zenoh
 def test_ctrl_c_keeps_committed_results_and_cleans_up(tmp_path: Path, popen_cleanup: list) -> None:
     out = tmp_path / "long.csv"
     tag, env = tagged()
@@ -173,6 +175,7 @@ def test_describe_prints_order_and_feedback_edges() -> None:
     assert "mass1.u -> mass2.F via gain" in done.stdout
 
 
+@pytest.mark.zenoh
 def test_external_subsim_started_by_hand(tmp_path: Path, popen_cleanup: list) -> None:
     """The coordinator prints the command; a 'user' starts it as a separate process."""
     sc = tmp_path / "ext.toml"

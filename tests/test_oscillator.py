@@ -76,6 +76,7 @@ def test_distributed_needs_fewer_stages_than_centralized(tmp_path: Path) -> None
     assert stages["distributed"] < stages["centralized"]
 
 
+@pytest.mark.zenoh
 @pytest.mark.parametrize("method", ["centralized", "distributed"])
 def test_bit_identical_in_process_and_over_zenoh(tmp_path: Path, method: str) -> None:
     sc = load(SCENARIO)

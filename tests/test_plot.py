@@ -51,6 +51,7 @@ def generic_result(path: Path, shift: float = 0.0) -> Path:
     return path
 
 
+@pytest.mark.slow
 def test_satellite_figures(satellite_results: list[Path], tmp_path: Path) -> None:
     diag = [p.with_name(p.stem + ".diag.csv") for p in satellite_results]  # as a shell glob would add them
     args = argparse.Namespace(results=[*satellite_results, *diag], out=tmp_path / "png", signals=None)

@@ -387,6 +387,7 @@ envelopes = st.fixed_dictionaries(
 )
 
 
+@pytest.mark.slow
 @fuzz(1500)
 @given(st.one_of(junk, envelopes, st.dictionaries(junk.filter(lambda k: not isinstance(k, (dict, list))), junk)))
 def test_decode_request_random_msgpack(value: Any) -> None:
@@ -486,6 +487,7 @@ def malformed_requests(draw: st.DrawFn) -> tuple[bytes, set[str], str, str]:
     return pack(msg), codes, f"{cmd}/{kind}", mention
 
 
+@pytest.mark.slow
 @fuzz(2000)
 @given(malformed_requests())
 def test_decode_request_rejects_malformed_requests(case: tuple[bytes, set[str], str, str]) -> None:
@@ -564,6 +566,7 @@ def decode_reply_totally(cmd: str, payload: bytes) -> None:
     assert isinstance(out, (dict, ErrorInfo))
 
 
+@pytest.mark.slow
 @fuzz(1000)
 @given(reply_cmds, st.one_of(st.binary(max_size=200), junk.map(pack), reply_envelopes.map(pack)))
 def test_decode_reply_random(cmd: str, payload: bytes) -> None:
@@ -605,6 +608,7 @@ def malformed_results(draw: st.DrawFn) -> tuple[str, bytes, set[str]]:
     return cmd, pack(msg), codes
 
 
+@pytest.mark.slow
 @fuzz(700)
 @given(malformed_results())
 def test_decode_reply_rejects_malformed_results(case: tuple[str, bytes, set[str]]) -> None:

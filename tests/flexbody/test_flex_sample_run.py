@@ -19,6 +19,8 @@ from subsims.flexbody.subsim import FlexBody
 from subsims.flexbody.vehicle import SAMPLE_VEHICLE
 
 # spec §2.3 table: t, R_x, R_y, R_z (ft), u, w (ft/s), printed to 6 decimals
+pytestmark = pytest.mark.paper
+
 TABLE = [
     (0, 1000.000000, 2000.000000, 3000.000000, 0, 0),
     (6, 1000.137315, 2029.835420, 3003.190981, -0.162841, 0.107517),

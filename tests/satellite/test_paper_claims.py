@@ -40,6 +40,8 @@ from cosim.runner import RunReport, run_scenario
 from cosim.scenario import ScenarioError, load
 from cosim.unified import run_unified
 
+pytestmark = pytest.mark.paper
+
 ROOT = Path(__file__).resolve().parents[2]
 SCENARIOS = ROOT / "scenarios" / "satellite"
 CASES = ("case1", "case2")
@@ -110,6 +112,8 @@ def position(run: tuple) -> np.ndarray:
     return select(columns, data, "orbit.R")
 
 
+@pytest.mark.slow
+@pytest.mark.zenoh
 def test_runs_cover_the_same_samples(runs: dict) -> None:
     stop = runs["stop"]
     ref_report, ref_columns, ref = runs["case1", "unified"]
@@ -126,6 +130,8 @@ def test_runs_cover_the_same_samples(runs: dict) -> None:
             assert np.all(np.isfinite(data))
 
 
+@pytest.mark.slow
+@pytest.mark.zenoh
 @pytest.mark.parametrize("method", COUPLED)
 @pytest.mark.parametrize("case", CASES)
 def test_recursive_feedback_matches_unified(runs: dict, case: str, method: str) -> None:
@@ -141,6 +147,8 @@ def test_recursive_feedback_matches_unified(runs: dict, case: str, method: str) 
     assert np.max(np.abs(euler_deg(rku))) > 1e3 * np.max(ANGLE_BOUND[case])
 
 
+@pytest.mark.slow
+@pytest.mark.zenoh
 @pytest.mark.parametrize("method", COUPLED)
 def test_case2_within_1e8_deg_on_every_axis_with_cubic_feedback(runs: dict, method: str) -> None:
     """With the interpolation error removed from the fed-back loads, case 2 meets the 1e-8 deg claim on the
@@ -153,6 +161,8 @@ def test_case2_within_1e8_deg_on_every_axis_with_cubic_feedback(runs: dict, meth
     assert d_angle[2] < 1e-2 * paper[2]
 
 
+@pytest.mark.slow
+@pytest.mark.zenoh
 @pytest.mark.parametrize("case", CASES)
 def test_centralized_and_distributed_agree(runs: dict, case: str) -> None:
     """Spec §10: RF-C and RF-D 'for all practical purposes ... identical' (measured ~1e-15 deg, 0 m)."""
@@ -181,6 +191,8 @@ def paper_nit(method: str, stages: int) -> int:
     return stages - 1 if method == "distributed" else stages - 2
 
 
+@pytest.mark.slow
+@pytest.mark.zenoh
 @pytest.mark.parametrize("case", CASES)
 def test_stages(runs: dict, case: str) -> None:
     """Spec §10: 'the maximum number of recursion stages is typically three, one of which could arguably
@@ -205,6 +217,7 @@ def test_stages(runs: dict, case: str) -> None:
     assert rfc[5] >= 0.99 * total and max(rfc) <= 6
 
 
+@pytest.mark.slow
 def test_case2_free_axis_deviation_is_the_interpolation_error(tmp_path: Path) -> None:
     """The RF vs RK-U difference is the paper's stated cause (spec §10): linear interpolation of the fed-back
     loads over the 0.1 s sample spacing inside the RK4 stages, an O(h^2) error. Halving the spacing (9
