@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -85,10 +86,24 @@ def test_check_uses_per_signal_tolerances_and_names_failures() -> None:
     assert result.largest == pytest.approx(0.5)
 
 
-@pytest.mark.parametrize("bad", [-1.0, math.nan, math.inf, "1e-3", True])
+@pytest.mark.parametrize("bad", [-1.0, -5e-324, math.nan, math.inf, "1e-3", True, None])
 def test_tolerance_rejects_bad_values(bad) -> None:
-    with pytest.raises(ValueError, match="tolerance"):
+    with pytest.raises(ValueError, match=r"^tolerance rel must be a finite number >= 0, got "):
         Tolerance(bad, 0.0)
+    with pytest.raises(ValueError, match=r"^tolerance abs must be a finite number >= 0, got "):
+        Tolerance(0.0, bad)
+
+
+def test_tolerance_accepts_zero_large_and_integer_values_and_is_frozen() -> None:
+    for rel, ab in [(0.0, 0.0), (1.0, 2.0), (1e300, 5e-324), (3, 0)]:
+        tol = Tolerance(rel, ab)
+        assert (tol.rel, tol.abs) == (rel, ab)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        tol.rel = 1.0  # type: ignore[misc]
+    empty = check({}, {}, Tolerance(0.0, 0.0))
+    assert empty.converged and empty.failing == [] and empty.largest == 0.0
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        empty.residuals = {}  # type: ignore[misc]
 
 
 def satellite_like() -> tuple[list[str], list[Coupling], dict[SignalRef, int]]:
