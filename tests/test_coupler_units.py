@@ -151,8 +151,23 @@ def test_first_guess_policies() -> None:
     np.testing.assert_allclose(first_guess("extrapolate", times, sizes, prev)["s.u"],
                                [[2, 1], [3, 1], [4, 1]], rtol=1e-15)
     np.testing.assert_array_equal(first_guess("extrapolate", times, sizes, None)["s.u"], np.zeros((3, 2)))
-    with pytest.raises(ValueError, match="unknown first-guess"):
+    with pytest.raises(ValueError, match=r"^unknown first-guess policy 'oracle'; known: zero, hold, extrapolate$"):
         first_guess("oracle", times, sizes, prev)
+    # a signal the previous interval did not have starts at zero under every policy; the others keep theirs
+    both = {"s.u": 2, "s.w": 1}
+    for policy in ("zero", "hold", "extrapolate"):
+        guess = first_guess(policy, times, both, prev)
+        assert sorted(guess) == ["s.u", "s.w"]
+        np.testing.assert_array_equal(guess["s.w"], np.zeros((3, 1)))
+        assert guess["s.u"].shape == (3, 2) and (policy == "zero") == (not guess["s.u"].any())
+    np.testing.assert_array_equal(first_guess("hold", times, sizes, {})["s.u"], np.zeros((3, 2)))
+    # extrapolation uses the coupling's interpolation: a quadratic continued by the cubic scheme stays exact,
+    # by the linear one it continues the last chord
+    quad = {"s.u": (prev_t, np.column_stack([prev_t**2, prev_t]))}
+    np.testing.assert_allclose(first_guess("extrapolate", times, sizes, quad, interp="cubic")["s.u"],
+                               np.column_stack([times**2, times]), rtol=1e-14)
+    np.testing.assert_allclose(first_guess("extrapolate", times, sizes, quad)["s.u"],
+                               np.column_stack([1.0 + 1.5 * (times - 1.0), times]), rtol=1e-14)
 
 
 @pytest.mark.parametrize(
