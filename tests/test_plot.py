@@ -133,6 +133,7 @@ def test_satellite_figures(satellite_results: list[Path], tmp_path: Path, drawn:
         np.testing.assert_allclose(altitude["lines"][0][j][2], radius / 1000.0 - 6367.65, rtol=0, atol=1e-9)
 
 
+@pytest.mark.slow  # pays for the two 60-s unified satellite runs when test_satellite_figures is deselected
 def test_time_window(satellite_results: list[Path], tmp_path: Path) -> None:
     written = plot_files(satellite_results, tmp_path, window=(20.0, 40.0))
     assert tmp_path / "satellite-euler.png" in written
