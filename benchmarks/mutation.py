@@ -108,7 +108,7 @@ def mutate(module: str, tests: list[str], work: Path, mutmut: str, python: str, 
     for mid in survivors:
         diff = subprocess.run([mutmut, "show", str(mid)], cwd=work, env=env, capture_output=True, text=True).stdout
         lines = [ln for ln in diff.splitlines() if ln.startswith(("-", "+", "@")) and not ln.startswith(("---", "+++"))]
-        print(f"--- {STATUS[dict(rows)[mid]]} mutant {mid}:\n" + "\n".join(lines))
+        print(f"--- {STATUS[dict(rows)[mid]]} mutant {mid}:\n" + "\n".join(lines or diff.splitlines()))
     killed, total = counts.get("killed", 0), sum(v for k, v in counts.items() if k != "skipped")
     share = killed / total if total else float("nan")
     print(f"    {module}: {killed} of {total} mutants killed ({share:.1%}); " + ", ".join(
