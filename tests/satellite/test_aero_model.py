@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -150,6 +152,8 @@ def test_each_parameter_is_read_and_checked_by_name(name: str, bad, need: str | 
     zero_ok = {"rho": 0.0, "cd": 0.0}
     if name in zero_ok:
         assert getattr(AeroParams.from_mapping({name: 0.0}), name) == 0.0
+    with pytest.raises(dataclasses.FrozenInstanceError):  # parameters are values: shared, hashed, never changed
+        p.rho = 1.0  # type: ignore[misc]
     with pytest.raises(ValueError, match=r"^unknown aero parameter\(s\) \['density'\]; known: rho, cd, length, "
                                          r"width, height$"):
         AeroParams.from_mapping({"density": 1.0})
