@@ -7,6 +7,7 @@ import signal
 import subprocess
 import sys
 import time
+import uuid
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -19,17 +20,55 @@ OSCILLATOR = ROOT / "scenarios" / "oscillator.toml"
 COSIM = [sys.executable, "-m", "cosim.cli"]
 
 
-def serving(marker: str) -> list[int]:
-    """Pids of live subsim processes whose command line contains ``marker`` (a run id: other test sessions on
-    the machine run oscillator subsims too)."""
-    out = subprocess.run(["ps", "-ww", "-eo", "pid,stat,args"], capture_output=True, text=True).stdout
-    return [int(line.split()[0]) for line in out.splitlines()[1:]
-            if "--run" in line and marker in line.split() and not line.split()[1].startswith("Z")]
+TAG = "COSIM_TEST_TAG"
 
 
-def run_ids(stderr: str) -> set[str]:
-    """The run ids the subsims announced ("<name>: serving run <id> via ...")."""
-    return {line.split("serving run ", 1)[1].split()[0] for line in stderr.splitlines() if "serving run " in line}
+def tagged() -> tuple[bytes, dict[str, str]]:
+    """A fresh tag and an environment carrying it: every process the test starts, and their children
+    (the launcher passes its environment on), carry it, and no other test's processes do."""
+    tag = uuid.uuid4().hex
+    return f"{TAG}={tag}".encode(), {**os.environ, TAG: tag}
+
+
+def serving(tag: bytes) -> list[int]:
+    """Pids of live processes (not zombies: their environ reads empty) whose environment holds ``tag``.
+
+    Looks only at this test's processes, orphaned ones included, so suites running side by side do not
+    see each other's subsims (a scan of all command lines for "subsims.oscillator" did)."""
+    if not Path("/proc/self/environ").exists():
+        pytest.skip("needs /proc to find the test's processes")
+    pids = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                environ = (entry / "environ").read_bytes()
+            except OSError:  # gone meanwhile, or another user's
+                continue
+            if tag in environ.split(b"\0"):
+                pids.append(int(entry.name))
+    return pids
+
+
+def test_serving_sees_only_the_tagged_processes(popen_cleanup: list) -> None:
+    """The finder can fail: it sees a tagged child and its grandchild, and not an untagged sibling."""
+    tag, env = tagged()
+    code = "import subprocess, sys, time; subprocess.Popen([sys.executable, '-c', 'import time; time.sleep(60)']); " \
+           "time.sleep(60)"
+    parent = subprocess.Popen([sys.executable, "-c", code], env=env)
+    other = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    popen_cleanup += [parent, other]
+    deadline = time.monotonic() + 30
+    while len(serving(tag)) < 2 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    found = serving(tag)
+    assert parent.pid in found and other.pid not in found and len(found) == 2
+    for pid in found:
+        os.kill(pid, signal.SIGKILL)
+    parent.wait()
+    deadline = time.monotonic() + 30
+    while serving(tag) and time.monotonic() < deadline:  # the grandchild is reaped by init
+        time.sleep(0.05)
+    assert serving(tag) == []
 
 
 @pytest.fixture
@@ -42,10 +81,12 @@ def popen_cleanup() -> Iterator[list[subprocess.Popen]]:
         p.wait()
 
 
+@pytest.mark.zenoh
 def test_run_writes_results_and_diagnostics_and_leaves_no_process(tmp_path: Path) -> None:
     out = tmp_path / "osc.csv"
+    tag, env = tagged()
     done = subprocess.run([*COSIM, "run", str(OSCILLATOR), "--stop", "0.2", "--output", str(out)],
-                          capture_output=True, text=True, timeout=120)
+                          capture_output=True, text=True, timeout=120, env=env)
     assert done.returncode == 0, done.stderr
     cols, data = read_results(out)
     assert cols == ["time", "mass1.u[0]", "mass1.v[0]", "mass2.u[0]", "mass2.v[0]"]
@@ -54,7 +95,7 @@ def test_run_writes_results_and_diagnostics_and_leaves_no_process(tmp_path: Path
     assert diag[0] == "interval,t0,t1,stages,largest_residual,wall_time_s,halvings,restarts" and len(diag) == 1 + 4
     assert "order: mass1 -> mass2" in done.stdout and str(out) in done.stdout
     assert "%" not in done.stderr  # no progress display when stderr is not a terminal
-    assert len(run_ids(done.stderr)) == 1 and serving(run_ids(done.stderr).pop()) == []
+    assert serving(tag) == []  # neither the coordinator nor any subsim it started is left
 
 
 def test_npz_output_by_suffix_in_process(tmp_path: Path) -> None:
@@ -66,24 +107,27 @@ def test_npz_output_by_suffix_in_process(tmp_path: Path) -> None:
     assert cols[0] == "time" and data.shape == (9, 5) and done.stderr == ""  # 2 intervals x 4 samples + the end
 
 
+@pytest.mark.zenoh
 def test_ctrl_c_keeps_committed_results_and_cleans_up(tmp_path: Path, popen_cleanup: list) -> None:
     out = tmp_path / "long.csv"
+    tag, env = tagged()
     proc = subprocess.Popen([*COSIM, "run", str(OSCILLATOR), "--stop", "1000", "--output", str(out)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     popen_cleanup.append(proc)
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline and (not out.exists() or len(out.read_text().splitlines()) < 50):
         time.sleep(0.1)
-    children = [int(p) for p in subprocess.run(["ps", "-o", "pid=", "--ppid", str(proc.pid)], capture_output=True,
-                                               text=True).stdout.split()]
-    assert len(children) >= 2
+    children = [pid for pid in serving(tag) if pid != proc.pid]
+    assert len(children) == 2  # mass1 and mass2 (the router runs inside the coordinator)
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=30)
     assert proc.returncode == 130 and "stopped by SIGINT at t = " in err
     _, data = read_results(out)
     assert data.shape[0] >= 50 and data[-1, 0] < 1000
-    time.sleep(0.5)
-    assert [p for p in children if _alive(p)] == []
+    deadline = time.monotonic() + 30
+    while serving(tag) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert serving(tag) == [] and [p for p in children if _alive(p)] == []
 
 
 def _alive(pid: int) -> bool:
@@ -132,6 +176,7 @@ def test_describe_prints_order_and_feedback_edges() -> None:
     assert "mass1.u -> mass2.F via gain" in done.stdout
 
 
+@pytest.mark.zenoh
 def test_external_subsim_started_by_hand(tmp_path: Path, popen_cleanup: list) -> None:
     """The coordinator prints the command; a 'user' starts it as a separate process."""
     sc = tmp_path / "ext.toml"

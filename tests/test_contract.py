@@ -13,7 +13,7 @@ N = 5
 TIMES = np.linspace(0.0, 0.4, N)
 
 
-@pytest.fixture(params=["inprocess", "remote"])
+@pytest.fixture(params=["inprocess", pytest.param("remote", marks=pytest.mark.zenoh)])
 def handle(request: pytest.FixtureRequest) -> SubsimHandle:
     if request.param == "inprocess":
         h = InProcessHandle(Integrator(), name="integ")

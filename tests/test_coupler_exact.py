@@ -118,4 +118,4 @@ def test_oscillator_converges_to_cosine_over_ten_periods(method: str, build) -> 
     c.run(0.0, 10.0, lambda iv: (ts.append(iv.t), ys.append(iv.outputs[first]["y"][:, 0])))
     t, y = np.concatenate(ts), np.concatenate(ys)
     assert t[-1] == pytest.approx(10.0)
-    assert np.max(np.abs(y - np.cos(w * t))) < 1e-6
+    assert np.max(np.abs(y - np.cos(w * t))) < 1e-7  # measured 8.5e-9 (double), 1.7e-8 (pair)

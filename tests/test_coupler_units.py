@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -30,6 +31,55 @@ def test_convrg_is_relative_to_the_newest_span_or_absolute() -> None:
     np.testing.assert_array_equal(ok, [True, False])
 
 
+def test_convrg_span_is_the_newest_stages_per_channel_and_bounds_are_inclusive() -> None:
+    """Cases that tell the paper's ``convrg`` from plausible wrong versions of it (all values exact in binary).
+
+    Each row is (new, old, rel, abs, expected pass) for one channel; the perturbation sits on an END
+    sample, so the newest and the previous stage have different spans, and every channel sits on an
+    offset, so a "span" of max|new| or of max-min over all channels would differ too.
+    Wrong versions each case catches: span of the previous stage (a, b); rel and abs swapped (c, d);
+    ``<`` instead of ``<=`` (a, e); span over all channels instead of per channel (f, with a);
+    max |new| or mean |new| instead of the span (a, b, g); ``and`` instead of ``or`` (d); the span
+    of |new - old| instead of the span of new (a).
+    """
+    base = 100.0
+    cases = [
+        # a: residual 1, newest span 4, previous span 3: 1 <= 0.25*4 passes (on the boundary)
+        ([0.0, 1.0, 4.0], [0.0, 1.0, 3.0], 0.25, 0.0, True),
+        # b: residual 1, newest span 3, previous span 4: 1 > 0.25*3 fails
+        ([0.0, 1.0, 3.0], [0.0, 1.0, 4.0], 0.25, 0.0, False),
+        # c: rel alone would pass (1 <= 0.5*4), abs alone would not (1 > 0.5): passes through rel
+        ([0.0, 2.0, 4.0], [1.0, 2.0, 4.0], 0.5, 0.5, True),
+        # d: abs alone passes (0.5 <= 0.5, boundary), rel alone does not (0.5 > 0.0625*4)
+        ([0.0, 2.0, 4.0], [0.5, 2.0, 4.0], 0.0625, 0.5, True),
+        # e: just over both bounds fails
+        ([0.0, 2.0, 4.0], [0.0, 2.0, 4.0 + 2.0**-20], 2.0**-23, 2.0**-21, False),
+        # f: a constant channel (span 0) with a residual above abs fails whatever the other channels' span
+        ([5.0, 5.0, 5.0], [5.0, 5.0, 5.0 + 2.0**-10], 0.5, 2.0**-11, False),
+        # g: a signal near a large offset: span 2, not max|new| = 102 (before the offset is added: 2)
+        ([0.0, 1.0, 2.0], [0.0, 1.0, 2.5], 0.125, 0.0, False),
+    ]
+    new = base + np.column_stack([np.array(c[0]) for c in cases])
+    old = base + np.column_stack([np.array(c[1]) for c in cases])
+    expected_residual = np.abs(np.column_stack([np.subtract(c[0], c[1]) for c in cases])).max(axis=0)
+    for j, (_, _, rel, ab, ok) in enumerate(cases):
+        residual, passed = convrg(new[:, [j]], old[:, [j]], Tolerance(rel=rel, abs=ab))
+        assert residual[0] == expected_residual[j], (j, residual)
+        assert bool(passed[0]) is ok, f"case {'abcdefg'[j]}: expected {'pass' if ok else 'fail'}"
+    # all channels at once with one tolerance: each channel is judged on its own span
+    residual, passed = convrg(new[:, [0, 5]], old[:, [0, 5]], Tolerance(rel=0.25, abs=0.0))
+    np.testing.assert_array_equal(residual, [1.0, 2.0**-10])
+    np.testing.assert_array_equal(passed, [True, False])  # a global span (4) would pass channel f
+    residual, passed = convrg(new[:, [0, 1]], old[:, [0, 1]], Tolerance(rel=0.25, abs=0.0))
+    np.testing.assert_array_equal(passed, [True, False])
+    # the same through check(): per-signal tolerances and the converged flag
+    result = check({"s.a": new[:, [0]], "s.b": new[:, [1]]}, {"s.a": old[:, [0]], "s.b": old[:, [1]]},
+                   Tolerance(rel=0.25, abs=0.0))
+    assert result.failing == ["s.b"] and not result.converged and result.largest == 1.0
+    assert check({"s.b": new[:, [1]]}, {"s.b": old[:, [1]]}, Tolerance(0.25, 0.0),
+                 {"s.b": Tolerance(1 / 3 + 2.0**-50, 0.0)}).converged  # 1 <= rel * 3
+
+
 def test_check_uses_per_signal_tolerances_and_names_failures() -> None:
     new = {"a.x": np.array([[0.0], [1.0]]), "b.y": np.array([[0.0], [1000.0]])}
     old = {"a.x": np.array([[0.0], [1.001]]), "b.y": np.array([[0.0], [1000.5]])}
@@ -38,10 +88,24 @@ def test_check_uses_per_signal_tolerances_and_names_failures() -> None:
     assert result.largest == pytest.approx(0.5)
 
 
-@pytest.mark.parametrize("bad", [-1.0, math.nan, math.inf, "1e-3", True])
+@pytest.mark.parametrize("bad", [-1.0, -5e-324, math.nan, math.inf, "1e-3", True, None])
 def test_tolerance_rejects_bad_values(bad) -> None:
-    with pytest.raises(ValueError, match="tolerance"):
+    with pytest.raises(ValueError, match=r"^tolerance rel must be a finite number >= 0, got "):
         Tolerance(bad, 0.0)
+    with pytest.raises(ValueError, match=r"^tolerance abs must be a finite number >= 0, got "):
+        Tolerance(0.0, bad)
+
+
+def test_tolerance_accepts_zero_large_and_integer_values_and_is_frozen() -> None:
+    for rel, ab in [(0.0, 0.0), (1.0, 2.0), (1e300, 5e-324), (3, 0)]:
+        tol = Tolerance(rel, ab)
+        assert (tol.rel, tol.abs) == (rel, ab)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        tol.rel = 1.0  # type: ignore[misc]
+    empty = check({}, {}, Tolerance(0.0, 0.0))
+    assert empty.converged and empty.failing == [] and empty.largest == 0.0
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        empty.residuals = {}  # type: ignore[misc]
 
 
 def satellite_like() -> tuple[list[str], list[Coupling], dict[SignalRef, int]]:
@@ -89,8 +153,23 @@ def test_first_guess_policies() -> None:
     np.testing.assert_allclose(first_guess("extrapolate", times, sizes, prev)["s.u"],
                                [[2, 1], [3, 1], [4, 1]], rtol=1e-15)
     np.testing.assert_array_equal(first_guess("extrapolate", times, sizes, None)["s.u"], np.zeros((3, 2)))
-    with pytest.raises(ValueError, match="unknown first-guess"):
+    with pytest.raises(ValueError, match=r"^unknown first-guess policy 'oracle'; known: zero, hold, extrapolate$"):
         first_guess("oracle", times, sizes, prev)
+    # a signal the previous interval did not have starts at zero under every policy; the others keep theirs
+    both = {"s.u": 2, "s.w": 1}
+    for policy in ("zero", "hold", "extrapolate"):
+        guess = first_guess(policy, times, both, prev)
+        assert sorted(guess) == ["s.u", "s.w"]
+        np.testing.assert_array_equal(guess["s.w"], np.zeros((3, 1)))
+        assert guess["s.u"].shape == (3, 2) and (policy == "zero") == (not guess["s.u"].any())
+    np.testing.assert_array_equal(first_guess("hold", times, sizes, {})["s.u"], np.zeros((3, 2)))
+    # extrapolation uses the coupling's interpolation: a quadratic continued by the cubic scheme stays exact,
+    # by the linear one it continues the last chord
+    quad = {"s.u": (prev_t, np.column_stack([prev_t**2, prev_t]))}
+    np.testing.assert_allclose(first_guess("extrapolate", times, sizes, quad, interp="cubic")["s.u"],
+                               np.column_stack([times**2, times]), rtol=1e-14)
+    np.testing.assert_allclose(first_guess("extrapolate", times, sizes, quad)["s.u"],
+                               np.column_stack([1.0 + 1.5 * (times - 1.0), times]), rtol=1e-14)
 
 
 @pytest.mark.parametrize(

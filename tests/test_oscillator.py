@@ -53,7 +53,7 @@ def test_converges_to_exact_solution_at_expected_order(
         errors.append(max_error(data))
     orders = np.log2(np.array(errors[:-1]) / np.array(errors[1:]))
     assert np.all(np.abs(orders - expected_order) < 0.5), (errors, orders)
-    assert errors[-1] < (1e-3 if interp == "linear" else 1e-6)
+    assert errors[-1] < (1e-3 if interp == "linear" else 5e-7)  # measured 4.1e-4, 1.2e-7 (H = 0.01)
 
 
 @pytest.mark.parametrize("method", ["centralized", "distributed"])
@@ -62,7 +62,7 @@ def test_energy_stays_at_ten_pi_squared(tmp_path: Path, method: str) -> None:
     u1, v1, u2, v2 = data[:, 1], data[:, 2], data[:, 3], data[:, 4]
     k, k12 = 4 * np.pi**2, 16 * np.pi**2
     energy = 0.5 * (v1**2 + v2**2) + 0.5 * (k * u1**2 + k * u2**2 + k12 * (u1 - u2) ** 2)
-    np.testing.assert_allclose(energy, 10 * np.pi**2, rtol=1e-5)
+    np.testing.assert_allclose(energy, 10 * np.pi**2, rtol=2e-7)  # measured 2.3e-8
 
 
 def test_distributed_needs_fewer_stages_than_centralized(tmp_path: Path) -> None:
@@ -76,6 +76,7 @@ def test_distributed_needs_fewer_stages_than_centralized(tmp_path: Path) -> None
     assert stages["distributed"] < stages["centralized"]
 
 
+@pytest.mark.zenoh
 @pytest.mark.parametrize("method", ["centralized", "distributed"])
 def test_bit_identical_in_process_and_over_zenoh(tmp_path: Path, method: str) -> None:
     sc = load(SCENARIO)

@@ -16,6 +16,7 @@ from matplotlib.image import imread  # noqa: E402
 from cosim import plot as cosim_plot  # noqa: E402
 from cosim.cli import main as cosim_main  # noqa: E402
 from cosim.plot import PlotError, envelope, plot_command, plot_files  # noqa: E402
+from cosim.results import read_results  # noqa: E402
 from cosim.scenario import load  # noqa: E402
 from cosim.unified import run_unified  # noqa: E402
 
@@ -30,6 +31,48 @@ def assert_real_png(path: Path) -> None:
     assert img.shape[0] > 300 and img.shape[1] > 600
     # something drawn: many distinct colours, not a blank canvas
     assert len(np.unique(img.reshape(-1, img.shape[-1])[:, :3].round(2), axis=0)) > 20
+
+
+@pytest.fixture
+def drawn(monkeypatch: pytest.MonkeyPatch) -> dict[str, dict]:
+    """What every saved figure shows, by file name: title, axis labels, and each line's label and data."""
+    from matplotlib.figure import Figure
+
+    seen: dict[str, dict] = {}
+    save = Figure.savefig
+
+    def record(fig: Figure, path, *args, **kwargs):  # noqa: ANN001, ANN202 - matplotlib's signature
+        axes = fig.get_axes()
+        seen[Path(path).name] = {
+            "title": axes[0].get_title(),
+            "xlabel": axes[-1].get_xlabel(),
+            "ylabels": [ax.get_ylabel() for ax in axes],
+            "lines": [[(ln.get_label(), np.asarray(ln.get_xdata(), float), np.asarray(ln.get_ydata(), float))
+                       for ln in ax.get_lines()] for ax in axes],
+            "colors": [[ln.get_color() for ln in ax.get_lines()] for ax in axes],
+        }
+        return save(fig, path, *args, **kwargs)
+
+    monkeypatch.setattr(Figure, "savefig", record)
+    return seen
+
+
+def assert_colours_drawn(path: Path, colours: list[str]) -> None:
+    """Every line colour appears in the PNG's pixels (to within 8 of 255 per channel: antialiasing)."""
+    from matplotlib.colors import to_rgb
+
+    img = imread(path)[:, :, :3].reshape(-1, 3)
+    for c in colours:
+        assert np.any(np.all(np.abs(img - np.array(to_rgb(c))) < 8 / 255, axis=1)), (path.name, c)
+
+
+def dcm321(phi_deg: np.ndarray) -> np.ndarray:
+    """z-y-x (3-2-1) rotation matrices of rows of angles (phi_x, phi_y, phi_z) in deg, written here."""
+    x, y, z = np.radians(phi_deg).T
+    cx, sx, cy, sy, cz, sz = np.cos(x), np.sin(x), np.cos(y), np.sin(y), np.cos(z), np.sin(z)
+    return np.stack([np.stack([cy * cz, cy * sz, -sy], -1),
+                     np.stack([sx * sy * cz - cx * sz, sx * sy * sz + cx * cz, sx * cy], -1),
+                     np.stack([cx * sy * cz + sx * sz, cx * sy * sz - sx * cz, cx * cy], -1)], 1)
 
 
 @pytest.fixture(scope="module")
@@ -51,7 +94,8 @@ def generic_result(path: Path, shift: float = 0.0) -> Path:
     return path
 
 
-def test_satellite_figures(satellite_results: list[Path], tmp_path: Path) -> None:
+@pytest.mark.slow
+def test_satellite_figures(satellite_results: list[Path], tmp_path: Path, drawn: dict[str, dict]) -> None:
     # what `cosim plot results/*` passes: the diagnostics and units files beside the results (skipped)
     beside = [p.with_name(p.name + s) for p in satellite_results for s in (".diag.csv", ".meta.json")]
     assert all(p.exists() for p in beside)
@@ -60,8 +104,38 @@ def test_satellite_figures(satellite_results: list[Path], tmp_path: Path) -> Non
     for name in ("satellite-euler", "satellite-rates", "satellite-altitude", "orbit.R", "orbit.V",
                  "attitude.phi", "attitude.omega", "aero.force", "aero.torque"):
         assert_real_png(tmp_path / "png" / f"{name}.png")
+        shown = drawn[f"{name}.png"]
+        assert shown["xlabel"] == "time (s)"
+        assert_colours_drawn(tmp_path / "png" / f"{name}.png", [c for cs in shown["colors"] for c in cs])
+        for lines in shown["lines"]:  # one line per result file, labelled with its name
+            assert [label for label, _, _ in lines] == ["case1-unified", "case3-unified"]
+    # what is drawn is the results' data, transformed as the captions say (computed here from the CSV files)
+    data = {}
+    for path in satellite_results:
+        cols, values = read_results(path)
+        data[path.stem] = {c: values[:, cols.index(c)] for c in cols}
+    euler = drawn["satellite-euler.png"]
+    assert euler["ylabels"] == ["phi_x (deg)", "phi_y (deg)", "phi_z (deg)"]
+    rates, altitude = drawn["satellite-rates.png"], drawn["satellite-altitude.png"]
+    assert rates["ylabels"] == ["omega_x (deg/s)", "omega_y (deg/s)", "omega_z (deg/s)"]
+    assert altitude["ylabels"] == ["altitude (km)"] and altitude["title"] == "Altitude"
+    for j, stem in enumerate(("case1-unified", "case3-unified")):
+        d = data[stem]
+        t = d["time"]
+        phi = np.degrees(np.column_stack([d[f"attitude.phi[{i}]"] for i in range(3)]))
+        shown = np.column_stack([euler["lines"][i][j][2][~np.isnan(euler["lines"][i][j][2])] for i in range(3)])
+        np.testing.assert_array_equal(euler["lines"][0][j][1][~np.isnan(euler["lines"][0][j][1])], t)
+        # range-limited: phi_x, phi_z in (-180, 180], phi_y in [-90, 90], and the same attitude as the state angles
+        assert np.all(np.abs(shown[:, [0, 2]]) <= 180.0) and np.all(np.abs(shown[:, 1]) <= 90.0)
+        np.testing.assert_allclose(dcm321(shown), dcm321(phi), rtol=0, atol=1e-12)
+        for i in range(3):
+            np.testing.assert_allclose(rates["lines"][i][j][2], np.degrees(d[f"attitude.omega[{i}]"]), rtol=1e-15)
+            np.testing.assert_array_equal(drawn["orbit.R.png"]["lines"][i][j][2], d[f"orbit.R[{i}]"])
+        radius = np.sqrt(sum(d[f"orbit.R[{i}]"] ** 2 for i in range(3)))
+        np.testing.assert_allclose(altitude["lines"][0][j][2], radius / 1000.0 - 6367.65, rtol=0, atol=1e-9)
 
 
+@pytest.mark.slow  # pays for the two 60-s unified satellite runs when test_satellite_figures is deselected
 def test_time_window(satellite_results: list[Path], tmp_path: Path) -> None:
     written = plot_files(satellite_results, tmp_path, window=(20.0, 40.0))
     assert tmp_path / "satellite-euler.png" in written
@@ -69,13 +143,25 @@ def test_time_window(satellite_results: list[Path], tmp_path: Path) -> None:
         plot_files(satellite_results, tmp_path, window=(100.0, 200.0))
 
 
-def test_generic_signals_via_cli(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+def test_generic_signals_via_cli(tmp_path: Path, capsys: pytest.CaptureFixture, drawn: dict[str, dict]) -> None:
     a, b = generic_result(tmp_path / "a.csv"), generic_result(tmp_path / "b.csv", shift=0.5)
     assert cosim_main(["plot", str(a), str(b), "--out", str(tmp_path / "png")]) == 0
     printed = capsys.readouterr().out.split()
     assert sorted(Path(p).name for p in printed) == ["m1.u.png", "m1.v.png", "m2.x.png"]
     for p in printed:
         assert_real_png(Path(p))
+        assert_colours_drawn(Path(p), [c for cs in drawn[Path(p).name]["colors"] for c in cs])
+    # each figure: one panel, titled and labelled by its signal, one line per file with that file's data
+    t = np.linspace(0.0, 2.0, 201)
+    expected = {"m1.u": [np.cos(2 * np.pi * t), np.cos(2 * np.pi * t + 0.5)], "m1.v": [np.sin(2 * np.pi * t)] * 2,
+                "m2.x": [t**2] * 2}
+    for signal, ys in expected.items():
+        shown = drawn[f"{signal}.png"]
+        assert shown["title"] == signal and shown["ylabels"] == [f"{signal}[0]"] and shown["xlabel"] == "time (s)"
+        assert [label for label, _, _ in shown["lines"][0]] == ["a", "b"]
+        for (_, x, y), y_expected in zip(shown["lines"][0], ys):
+            np.testing.assert_allclose(x, t, rtol=0, atol=1e-15)
+            np.testing.assert_allclose(y, y_expected, rtol=0, atol=1e-15)
     assert not (tmp_path / "png" / "satellite-euler.png").exists()  # not a satellite result
 
 

@@ -18,6 +18,9 @@ from cosim.launch import Bus, subsim_command
 TIMES = np.linspace(0.0, 0.4, 5)
 
 
+pytestmark = pytest.mark.zenoh
+
+
 def test_kill_9_mid_run_is_reported_within_one_second(cosim_bus: Bus) -> None:
     proc = cosim_bus.spawn("subsims.integrator", "victim")
     proc.handle.configure({"compute_delay": 30.0})

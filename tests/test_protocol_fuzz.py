@@ -4,7 +4,10 @@ Claims under test:
 
 * ``decode_request`` and ``decode_reply`` are total: whatever the bytes, they return or raise
   ``ProtocolError``, never anything else, and a structurally wrong message is rejected with the
-  documented error code (docs/protocol.md).
+  documented error code (docs/protocol.md). Their catch-all turns an unexpected exception (a bug in
+  a checker) into code ``internal``, and ``answer``'s into an ``internal`` reply: every test below
+  asserts that code never comes out, so a crash inside the decoders fails the test instead of passing
+  as "an error reply" (``test_a_crashing_checker_fails_the_fuzz_assertions`` shows it does).
 * ``answer(runtime, payload)`` turns garbage into a decodable error reply and leaves the
   runtime's committed state (time, state, history) untouched.
 * ``encode_request`` -> ``decode_request`` gives back the arguments; arrays bit for bit
@@ -347,7 +350,7 @@ def expect_protocol_error(payload: bytes, codes: set[str] | None = None) -> Prot
     try:
         request = decode_request(payload)
     except ProtocolError as exc:
-        assert exc.code in ERROR_CODES
+        no_crash(exc)
         assert isinstance(exc.message, str) and exc.message
         if codes is not None:
             assert exc.code in codes, f"code {exc.code!r} ({exc.message}) not in {codes}"
@@ -355,12 +358,18 @@ def expect_protocol_error(payload: bytes, codes: set[str] | None = None) -> Prot
     raise AssertionError(f"decoded {request!r}; expected a ProtocolError with code in {codes}")
 
 
+def no_crash(exc: ProtocolError) -> None:
+    """A documented rejection, not the decoders' catch-all for an unexpected exception (code ``internal``)."""
+    assert exc.code in ERROR_CODES
+    assert exc.code != "internal", f"the decoder crashed: {exc.message}"
+
+
 def decode_totally(payload: bytes) -> None:
     """Either a valid request or a ProtocolError: nothing else may escape."""
     try:
         request = decode_request(payload)
     except ProtocolError as exc:
-        assert exc.code in ERROR_CODES
+        no_crash(exc)
         return
     assert request.cmd in REQUESTS
 
@@ -386,6 +395,7 @@ envelopes = st.fixed_dictionaries(
 )
 
 
+@pytest.mark.slow
 @fuzz(1500)
 @given(st.one_of(junk, envelopes, st.dictionaries(junk.filter(lambda k: not isinstance(k, (dict, list))), junk)))
 def test_decode_request_random_msgpack(value: Any) -> None:
@@ -485,6 +495,7 @@ def malformed_requests(draw: st.DrawFn) -> tuple[bytes, set[str], str, str]:
     return pack(msg), codes, f"{cmd}/{kind}", mention
 
 
+@pytest.mark.slow
 @fuzz(2000)
 @given(malformed_requests())
 def test_decode_request_rejects_malformed_requests(case: tuple[bytes, set[str], str, str]) -> None:
@@ -492,6 +503,25 @@ def test_decode_request_rejects_malformed_requests(case: tuple[bytes, set[str], 
     event(what.split("/")[1])  # pytest --hypothesis-show-statistics shows the mix of mutations
     exc = expect_protocol_error(payload, codes)
     assert mention in exc.message, f"{what}: {exc.message!r} does not say {mention!r}"
+
+
+def test_a_crashing_checker_fails_the_fuzz_assertions(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The assertions above can fail: a checker that raises something other than ProtocolError is seen."""
+    import cosim.protocol.messages as messages
+
+    def broken(value: Any, path: str) -> Any:
+        raise ZeroDivisionError("checker bug")
+
+    fields = {**REQUESTS["set_state"], "time": (broken, True)}
+    monkeypatch.setitem(messages.REQUESTS, "set_state", fields)
+    payload = encode_request("set_state", {"time": 0.0, "state": np.zeros(2)})
+    with pytest.raises(AssertionError, match="crashed.*ZeroDivisionError"):
+        decode_totally(payload)
+    with pytest.raises(AssertionError, match="catch-all.*ZeroDivisionError"):
+        assert_error_reply(answer(fresh_runtime(), payload), RUNTIME)
+    monkeypatch.setitem(messages.RESULTS, "commit", {"time": (broken, True)})
+    with pytest.raises(AssertionError, match="crashed.*ZeroDivisionError"):
+        decode_reply_totally("commit", encode_result({"time": 1.0}))
 
 
 def test_named_hostile_arrays_are_rejected() -> None:
@@ -536,11 +566,15 @@ def decode_reply_totally(cmd: str, payload: bytes) -> None:
     try:
         out = decode_reply(cmd, payload)
     except ProtocolError as exc:
-        assert exc.code in ERROR_CODES
+        if cmd in RESULTS:
+            no_crash(exc)
+        else:  # asking for a command with no result schema is the caller's bug: the catch-all names it
+            assert exc.code in ERROR_CODES and (exc.code != "internal" or "KeyError" in exc.message), exc.message
         return
     assert isinstance(out, (dict, ErrorInfo))
 
 
+@pytest.mark.slow
 @fuzz(1000)
 @given(reply_cmds, st.one_of(st.binary(max_size=200), junk.map(pack), reply_envelopes.map(pack)))
 def test_decode_reply_random(cmd: str, payload: bytes) -> None:
@@ -582,12 +616,14 @@ def malformed_results(draw: st.DrawFn) -> tuple[str, bytes, set[str]]:
     return cmd, pack(msg), codes
 
 
+@pytest.mark.slow
 @fuzz(700)
 @given(malformed_results())
 def test_decode_reply_rejects_malformed_results(case: tuple[str, bytes, set[str]]) -> None:
     cmd, payload, codes = case
     with pytest.raises(ProtocolError) as info:
         decode_reply(cmd, payload)
+    no_crash(info.value)
     assert info.value.code in codes
 
 
@@ -662,6 +698,7 @@ def assert_error_reply(reply: bytes, rt: Runtime) -> ErrorInfo:
     info = decode_reply("status", reply)  # any command: an error reply does not depend on it
     assert isinstance(info, ErrorInfo)
     assert info.code in ERROR_CODES and info.message and info.subsim == rt.name
+    assert info.code != "internal", f"answer() took its catch-all: {info.message}"
     return info
 
 

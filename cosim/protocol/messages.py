@@ -177,7 +177,7 @@ def decode_request(payload: bytes) -> Request:
     except ProtocolError:
         raise
     except Exception as exc:  # a checker bug must still not escape as anything but a protocol error
-        raise ProtocolError("bad_request", f"undecodable request ({type(exc).__name__})") from None
+        raise ProtocolError("internal", f"undecodable request ({type(exc).__name__})") from None  # a bug, not the peer
 
 
 def request_command(payload: bytes) -> str:
@@ -213,7 +213,7 @@ def decode_reply(cmd: str, payload: bytes) -> dict[str, Any] | ErrorInfo:
     except ProtocolError:
         raise
     except Exception as exc:
-        raise ProtocolError("bad_request", f"undecodable reply ({type(exc).__name__})") from None
+        raise ProtocolError("internal", f"undecodable reply ({type(exc).__name__})") from None  # a bug, not the peer
 
 
 # --- sealed frames ------------------------------------------------------------------------------

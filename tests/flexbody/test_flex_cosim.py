@@ -20,6 +20,8 @@ from cosim.scenario import Scenario, load, parse
 from subsims.flexbody.appendage import coupling_constants
 from subsims.flexbody.reference import closed_loop_reference, heavy_bus_slew_reference
 
+pytestmark = pytest.mark.slow  # ~26 s on 2 idle cores: seven co-simulations over Zenoh
+
 SCENARIOS = Path(__file__).resolve().parents[2] / "scenarios" / "flexbody"
 SLEW_STOP = 2.0  # the flexible transient of the PD slew (tip deflection peaks at 0.07 ft near 0.3 s)
 
@@ -97,6 +99,7 @@ def slew_errors(run_) -> dict[str, float]:
     }
 
 
+@pytest.mark.zenoh
 @pytest.mark.parametrize("method, interval", SLEW_RUNS)
 def test_slew_matches_one_system_closed_loop_within_the_derived_bound(slew, method, interval):
     """Momentum error <= B_H = max |Delta^2/12 (tau'(t) - tau'(0+))| (see predicted_momentum_error); base-rate error
@@ -120,6 +123,7 @@ def test_slew_matches_one_system_closed_loop_within_the_derived_bound(slew, meth
     np.testing.assert_allclose(tips[:, 0], -tips[:, 1], atol=1e-9)
 
 
+@pytest.mark.zenoh
 def test_slew_error_falls_as_interval_squared(slew):
     """Halving H (same 11 samples, so Delta and the RK4 step halve too) divides every error by 4 (measured 3.99):
     the difference from the one-system loop is the O(Delta^2) interpolation of the exchanged torque, nothing else."""
@@ -128,6 +132,7 @@ def test_slew_error_falls_as_interval_squared(slew):
         assert 3.5 < coarse[name] / fine[name] < 4.5, (name, coarse[name], fine[name])
 
 
+@pytest.mark.zenoh
 def test_slew_methods_reach_the_same_answer(slew):
     """Jacobi and Gauss-Seidel converge to the same fixed point (to the 1e-9 convergence tolerance), which is
     10^4 times closer than either is to the reference: the methods differ in stages only."""
@@ -154,6 +159,7 @@ def split_runs(tmp_path_factory):
     return {m: run(variant("heavy_bus_split.toml"), m, 6.0, out) for m in ("distributed", "centralized")}
 
 
+@pytest.mark.zenoh
 @pytest.mark.parametrize("method, max_stages", [("distributed", 5), ("centralized", 8)])
 def test_heavy_bus_split_converges_in_a_handful_of_stages(split_runs, method, max_stages):
     """C2 over 0-6 s (through the torque reversal at 5 s): Gauss-Seidel <= 5 stages per interval (spec AT-13;
@@ -168,6 +174,7 @@ def test_heavy_bus_split_converges_in_a_handful_of_stages(split_runs, method, ma
     assert np.abs(sig["flexbody.q"][:, 3]).max() > 0.02  # the slew rings the appendage (0.027 ft)
 
 
+@pytest.mark.zenoh
 def test_heavy_bus_unsplit_needs_more_stages(split_runs, tmp_path):
     """C1 (inertia J, tau_flex): the loop d tau_flex / d omega_dot = D is left to the coupler, contraction
     mu = 0.234 per Gauss-Seidel stage: every interval needs more stages than the split's worst (measured 12-15 vs
@@ -182,6 +189,7 @@ def test_heavy_bus_unsplit_needs_more_stages(split_runs, tmp_path):
 # --- swapping bodies is a scenario change --------------------------------------------------------------------------
 
 
+@pytest.mark.zenoh
 def test_rigid_body_in_place_of_the_flexible_one(tmp_path):
     """slew_rigid.toml = slew.toml with [subsims.vehicle] the rigid attitude subsim (composite inertia J) and two
     couplings renamed; the same controller, settings and stop. Over Zenoh it follows the one-system loop of the

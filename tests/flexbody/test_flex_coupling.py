@@ -97,15 +97,16 @@ def mono():
 
 
 def test_heavy_bus_monolithic_reference_values(mono):
-    """Spec AT-13 table (7 digits): theta_3 (deg), omega_3 (deg/s), q_2x (ft) at t = 5, 10, 20 s."""
+    """Spec AT-13 table (7 digits): theta_3 (deg), omega_3 (deg/s), q_2x (ft) at t = 5, 10, 20 s, to the table's
+    rounding (5e-8; measured 2.2e-8 to 4.5e-8, i.e. every printed digit)."""
     table = {5: (2.7211734, 1.1078985, 0.0152806), 10: (5.4221176, -0.0513986, -0.0034971),
              20: (5.4303216, 0.0487018, 0.0103159)}
     for t, (th3, w3, q2x) in table.items():
         k = int(round(t / DT))
-        assert abs(np.degrees(mono["euler123"][k, 2]) - th3) < 1e-6
-        assert abs(np.degrees(mono["omega"][k, 2]) - w3) < 1e-6
-        assert abs(mono["q"][k, 3] - q2x) < 1e-6
-    np.testing.assert_allclose(mono["q"][:, 3], -mono["q"][:, 9], atol=1e-12)  # boom B mirrors boom A
+        assert abs(np.degrees(mono["euler123"][k, 2]) - th3) <= 5e-8
+        assert abs(np.degrees(mono["omega"][k, 2]) - w3) <= 5e-8
+        assert abs(mono["q"][k, 3] - q2x) <= 5e-8
+    np.testing.assert_allclose(mono["q"][:, 3], -mono["q"][:, 9], rtol=0, atol=1e-15)  # mirror; measured 1.4e-16
 
 
 def rigid_attitude(J, w0, times, torque, h=0.01):

@@ -157,6 +157,7 @@ def test_scenario_is_the_documented_one(scenario: Scenario) -> None:
     }
 
 
+@pytest.mark.zenoh
 @pytest.mark.parametrize("method", ["distributed", "centralized"])
 def test_coupled_matches_built_in_aero_within_the_budget(method: str, runs: dict[str, Run], reference, budget) -> None:
     run = runs[method]
@@ -187,6 +188,7 @@ def test_coupled_matches_built_in_aero_within_the_budget(method: str, runs: dict
     assert np.abs(bare["pos_C"][-1] - ref["pos_C"][-1]).max() > 1.0
 
 
+@pytest.mark.zenoh
 def test_the_two_methods_agree(runs: dict[str, Run], budget) -> None:
     d, c = runs["distributed"], runs["centralized"]
     np.testing.assert_array_equal(d.t, c.t)
@@ -197,6 +199,7 @@ def test_the_two_methods_agree(runs: dict[str, Run], budget) -> None:
     # measured: 3e-10 ft, 2e-7 lbf; the interpolation error is 1000 times more
 
 
+@pytest.mark.zenoh
 @pytest.mark.parametrize("method", ["distributed", "centralized"])
 def test_stages_per_interval_are_reported(method: str, runs: dict[str, Run], scenario: Scenario) -> None:
     run = runs[method]
@@ -216,6 +219,7 @@ def test_stages_per_interval_are_reported(method: str, runs: dict[str, Run], sce
     assert np.median(stages[1:]) <= (5 if method == "distributed" else 9)
 
 
+@pytest.mark.zenoh
 def test_error_falls_when_the_sample_spacing_is_halved(scenario: Scenario, runs: dict[str, Run], reference,
                                                        tmp_path: Path) -> None:
     """The difference from the built-in run is the coupling's: doubling the interval at 11 samples (0.02 s apart,

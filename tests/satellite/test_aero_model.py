@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -106,3 +108,53 @@ def test_adapter_contract_and_purity() -> None:
         Aero().initial_state({"rho": -1.0})
     with pytest.raises(ValueError, match="unknown aero parameter"):
         Aero().initial_state({"density": 1.0})
+
+
+def test_facet_subsets_give_the_moment_of_their_forces(rng: np.random.Generator) -> None:
+    """Any set of facets: force = sum of the exposed facets' drags, torque = sum of cp x force (computed here).
+    The full box's torque cancels (above), so only a subset shows a wrong component or sign in the torque sum."""
+    p = AeroParams(length=7.0, width=2.5, height=1.5)
+    facets = box_facets(7.0, 2.5, 1.5)
+    largest = np.zeros(3)
+    for k, v in enumerate(random_velocities(rng, 60)):
+        subset = facets[k % 6:] + facets[:k % 3]
+        vh = v / np.linalg.norm(v)
+        force, torque = np.zeros(3), np.zeros(3)
+        for area, cp in subset:
+            aproj = max(float(np.dot(area, vh)), 0.0)
+            f = -0.5 * p.rho * np.dot(v, v) * p.cd * aproj * vh
+            force, torque = force + f, torque + np.cross(cp, f)
+        got_f, got_t = aero_loads(v.tolist(), p, facets=subset)
+        np.testing.assert_allclose(got_f, force, rtol=1e-13, atol=1e-30)
+        np.testing.assert_allclose(got_t, torque, rtol=0, atol=1e-13 * np.linalg.norm(force) * 7.0)
+        largest = np.maximum(largest, np.abs(torque) / max(np.linalg.norm(force), 1e-300))
+    assert np.all(largest > 0.1), largest  # every torque component is exercised (moment arms ~1 m)
+
+
+def test_torque_transfer_of_an_arbitrary_torque_and_force() -> None:
+    """torque_about_cm on a torque that is not zero: listing T + r x F, physical (eq. 21) T - r x F."""
+    t, f, r = (1.0, -2.0, 3.5), (0.25, 4.0, -1.5), (0.5, -0.75, 2.0)
+    rxf = np.cross(r, f)
+    np.testing.assert_array_equal(torque_about_cm(t, f, r), np.array(t) + rxf)
+    np.testing.assert_array_equal(torque_about_cm(t, f, r, physical=True), np.array(t) - rxf)
+    np.testing.assert_array_equal(torque_about_cm(t, f), np.array(t) + np.cross(C.R_CM, f))  # default: the paper's
+
+
+@pytest.mark.parametrize(("name", "bad", "need"), [("rho", -1e-12, " >= 0"), ("cd", -0.5, " >= 0"),
+                                                   ("length", 0.0, " > 0"), ("width", -2.0, " > 0"),
+                                                   ("height", 0.0, " > 0"), ("cd", "x", None)])
+def test_each_parameter_is_read_and_checked_by_name(name: str, bad, need: str | None) -> None:
+    p = AeroParams.from_mapping({name: 7.5})
+    assert getattr(p, name) == 7.5 and all(getattr(p, n) == getattr(AeroParams(), n) for n in
+                                           ("rho", "cd", "length", "width", "height") if n != name)
+    message = f"parameter {name!r} must be " + (f"a finite number{need}" if need else "a number")
+    with pytest.raises(ValueError, match="^" + message.replace("(", r"\(") + ", got "):
+        AeroParams.from_mapping({name: bad})
+    zero_ok = {"rho": 0.0, "cd": 0.0}
+    if name in zero_ok:
+        assert getattr(AeroParams.from_mapping({name: 0.0}), name) == 0.0
+    with pytest.raises(dataclasses.FrozenInstanceError):  # parameters are values: shared, hashed, never changed
+        p.rho = 1.0  # type: ignore[misc]
+    with pytest.raises(ValueError, match=r"^unknown aero parameter\(s\) \['density'\]; known: rho, cd, length, "
+                                         r"width, height$"):
+        AeroParams.from_mapping({"density": 1.0})

@@ -9,17 +9,18 @@ runs go three at a time and take ~3-5 min of wall time on 2 cores.
 
 Claims and the bounds used (measured values at 2,000 s in the comments):
 
-* Cases 1 and 2 "identical ... for all solution approaches" (RF-C, RF-D, RK-U): position within
-  1e-4 m of RK-U; Euler angles within 1e-8 deg, except case 2's uncontrolled z axis. Its angle is the
+* Cases 1 and 2 "identical ... for all solution approaches" (RF-C, RF-D, RK-U): Euler angles within
+  1e-8 deg, except case 2's uncontrolled z axis; the bounds used are 10x the measured deviations
+  (``ANGLE_BOUND``, ``POSITION_BOUND``), tighter than that. Its angle is the
   integral of the torque errors that the paper blames for case 3's divergence (the feedback is a
   linear interpolant of 0.1 s samples inside the RK4 stages, spec §3.4); with no control to hold it,
-  that error grows like t^2 and passes 1e-8 deg at ~370 s (4.3e-7 deg at 2,000 s). It gets a 1e-6 deg
+  that error grows like t^2 and passes 1e-8 deg at ~370 s (4.3e-7 deg at 2,000 s). It gets a 4.3e-6 deg
   bound, and ``test_case2_free_axis_deviation_is_the_interpolation_error`` shows the deviation is that
   O(h^2) interpolation error: halving the sample spacing quarters it, and with cubic interpolation of
   the fed-back signals (the same scenario with ``interp = "cubic"``) both methods are within 1e-8 deg
   on every axis (measured 1.7e-12 deg): ``test_case2_within_1e8_deg_on_every_axis_with_cubic_feedback``.
-* RF-C and RF-D "for all practical purposes ... identical": within 1e-10 deg and 1e-6 m, and far
-  closer to each other than to RK-U.
+* RF-C and RF-D "for all practical purposes ... identical": within 1e-14 deg and 1e-12 m (measured
+  ~1e-15 deg, 0 m), and far closer to each other than to RK-U.
 * "The maximum number of recursion stages is typically three, one of which could arguably be said to
   serve no purpose other than to confirm satisfaction of error tolerances": see ``test_stages``.
 """
@@ -40,15 +41,20 @@ from cosim.runner import RunReport, run_scenario
 from cosim.scenario import ScenarioError, load
 from cosim.unified import run_unified
 
+pytestmark = pytest.mark.paper
+
 ROOT = Path(__file__).resolve().parents[2]
 SCENARIOS = ROOT / "scenarios" / "satellite"
 CASES = ("case1", "case2")
 COUPLED = ("centralized", "distributed")
 
-# Largest allowed deviation from RK-U, per Euler angle component (deg) and for the position (m)
-ANGLE_BOUND = {"case1": (1e-8, 1e-8, 1e-8),  # measured 6e-11, 3e-10, 1e-10 deg at 2,000 s
-               "case2": (1e-8, 1e-8, 1e-6)}  # measured 1e-11, 2e-10, 4.3e-7 deg (z uncontrolled)
-POSITION_BOUND = 1e-4  # m; measured 1.4e-7 (case 1), 3.9e-8 (case 2) at 2,000 s
+# Largest allowed deviation from RK-U, per Euler angle component (deg) and for the position (m): 10x what is
+# measured at 2,000 s, so a coupling that got worse by an order of magnitude fails even while it still met
+# the paper's "identical" (taken as 1e-8 deg, which every bound below also keeps except case 2's free z axis)
+PAPER_ANGLE = 1e-8  # deg
+ANGLE_BOUND = {"case1": (6e-10, 3e-9, 1e-9),  # measured 6e-11, 3e-10, 1e-10 deg at 2,000 s
+               "case2": (1e-10, 2e-9, 4.3e-6)}  # measured 1e-11, 2e-10, 4.3e-7 deg (z uncontrolled)
+POSITION_BOUND = {"case1": 1.4e-6, "case2": 3.9e-7}  # m; measured 1.4e-7 (case 1), 3.9e-8 (case 2)
 
 
 def quiet(_: str) -> None:
@@ -110,6 +116,8 @@ def position(run: tuple) -> np.ndarray:
     return select(columns, data, "orbit.R")
 
 
+@pytest.mark.slow
+@pytest.mark.zenoh
 def test_runs_cover_the_same_samples(runs: dict) -> None:
     stop = runs["stop"]
     ref_report, ref_columns, ref = runs["case1", "unified"]
@@ -126,6 +134,8 @@ def test_runs_cover_the_same_samples(runs: dict) -> None:
             assert np.all(np.isfinite(data))
 
 
+@pytest.mark.slow
+@pytest.mark.zenoh
 @pytest.mark.parametrize("method", COUPLED)
 @pytest.mark.parametrize("case", CASES)
 def test_recursive_feedback_matches_unified(runs: dict, case: str, method: str) -> None:
@@ -134,32 +144,37 @@ def test_recursive_feedback_matches_unified(runs: dict, case: str, method: str) 
     d_angle = np.max(np.abs(euler_deg(rf) - euler_deg(rku)), axis=0)
     d_pos = np.max(np.abs(position(rf) - position(rku)))
     assert np.all(d_angle <= ANGLE_BOUND[case]), f"Euler angle deviation {d_angle} deg > {ANGLE_BOUND[case]}"
-    assert d_pos <= POSITION_BOUND, f"position deviation {d_pos} m"
+    assert d_pos <= POSITION_BOUND[case], f"position deviation {d_pos} m"
     # two different numerical processes (interpolated vs stage-exact aerodynamics), not one file twice
     assert np.max(d_angle) > 0.0 and d_pos > 0.0
     # and the comparison is not vacuous: the attitude really moves (case 2's z axis drifts freely)
     assert np.max(np.abs(euler_deg(rku))) > 1e3 * np.max(ANGLE_BOUND[case])
 
 
+@pytest.mark.slow
+@pytest.mark.zenoh
 @pytest.mark.parametrize("method", COUPLED)
 def test_case2_within_1e8_deg_on_every_axis_with_cubic_feedback(runs: dict, method: str) -> None:
     """With the interpolation error removed from the fed-back loads, case 2 meets the 1e-8 deg claim on the
     free z axis too: the deviation at paper settings is the interpolation, not the coupling."""
     rf, rku = runs[CUBIC, method], runs["case2", "unified"]
     d_angle = np.max(np.abs(euler_deg(rf) - euler_deg(rku)), axis=0)
-    assert np.all(d_angle <= 1e-8), f"Euler angle deviation {d_angle} deg"
-    assert np.max(np.abs(position(rf) - position(rku))) <= POSITION_BOUND
+    assert np.all(d_angle <= PAPER_ANGLE), f"Euler angle deviation {d_angle} deg"
+    assert np.all(d_angle <= 2e-11), f"Euler angle deviation {d_angle} deg"  # measured 1.7e-12 deg
+    assert np.max(np.abs(position(rf) - position(rku))) <= POSITION_BOUND["case2"]
     paper = np.max(np.abs(euler_deg(runs["case2", method]) - euler_deg(rku)), axis=0)
     assert d_angle[2] < 1e-2 * paper[2]
 
 
+@pytest.mark.slow
+@pytest.mark.zenoh
 @pytest.mark.parametrize("case", CASES)
 def test_centralized_and_distributed_agree(runs: dict, case: str) -> None:
     """Spec §10: RF-C and RF-D 'for all practical purposes ... identical' (measured ~1e-15 deg, 0 m)."""
     c, d, u = runs[case, "centralized"], runs[case, "distributed"], runs[case, "unified"]
     d_angle = np.max(np.abs(euler_deg(c) - euler_deg(d)))
     d_pos = np.max(np.abs(position(c) - position(d)))
-    assert d_angle <= 1e-10 and d_pos <= 1e-6
+    assert d_angle <= 1e-14 and d_pos <= 1e-12, (d_angle, d_pos)  # measured ~1e-15 deg, 0 m
     # closer to each other than either is to the unified reference
     to_unified = np.max(np.abs(euler_deg(d) - euler_deg(u)))
     assert d_angle <= 1e-3 * to_unified
@@ -181,6 +196,8 @@ def paper_nit(method: str, stages: int) -> int:
     return stages - 1 if method == "distributed" else stages - 2
 
 
+@pytest.mark.slow
+@pytest.mark.zenoh
 @pytest.mark.parametrize("case", CASES)
 def test_stages(runs: dict, case: str) -> None:
     """Spec §10: 'the maximum number of recursion stages is typically three, one of which could arguably
@@ -205,6 +222,7 @@ def test_stages(runs: dict, case: str) -> None:
     assert rfc[5] >= 0.99 * total and max(rfc) <= 6
 
 
+@pytest.mark.slow
 def test_case2_free_axis_deviation_is_the_interpolation_error(tmp_path: Path) -> None:
     """The RF vs RK-U difference is the paper's stated cause (spec §10): linear interpolation of the fed-back
     loads over the 0.1 s sample spacing inside the RK4 stages, an O(h^2) error. Halving the spacing (9
