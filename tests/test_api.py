@@ -24,7 +24,7 @@ def cli(tmp_path: Path, scenario: Path, *args: str) -> tuple[list[str], np.ndarr
                            *args], capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr
     columns, data = read_results(out)
-    diag_columns, diag = read_results(tmp_path / "cli.diag.csv")
+    diag_columns, diag = read_results(tmp_path / "cli.csv.diag.csv")
     assert diag_columns == DIAG_COLUMNS
     return columns, data, diag
 

@@ -9,6 +9,7 @@ A block without a marker fails the test, so nothing in the tutorial goes unrun.
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import socket
@@ -106,9 +107,13 @@ def test_the_tutorial_runs_as_written(tmp_path: Path) -> None:
                 background.append(coordinator)
                 for line in coordinator.stderr:  # started when it waits for the external subsim
                     if line.startswith("cosim-attach "):
+                        attach_env = json.loads(line.split(" ", 1)[1])["env"]  # the two values a user pastes
                         break
             elif kind == "run" and arg == "terminal 2":
-                second = subprocess.Popen(body.strip().replace("7447", port), shell=True, cwd=work, env=env,
+                command = body.strip().replace("7447", port)
+                for name, value in attach_env.items():
+                    command = command.replace(f"{name}=...", f"{name}={value}")
+                second = subprocess.Popen(command, shell=True, cwd=work, env=env,
                                           stderr=subprocess.PIPE, text=True)
                 background.append(second)
                 out, err = coordinator.communicate(timeout=600)
