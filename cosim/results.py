@@ -18,7 +18,7 @@ import numpy as np
 from cosim.coupler.couplings import SignalRef
 from cosim.coupler.relaxation import Interval
 
-DIAG_COLUMNS = ["interval", "t0", "t1", "stages", "largest_residual", "wall_time_s", "halvings"]
+DIAG_COLUMNS = ["interval", "t0", "t1", "stages", "largest_residual", "wall_time_s", "halvings", "length_s", "error"]
 
 
 def column_names(signals: Sequence[tuple[SignalRef, int]]) -> list[str]:
@@ -61,7 +61,8 @@ class ResultWriter:
         self._count += 1
         t = interval.t
         self._diag.writerow([self._count, repr(float(t[0])), repr(float(t[-1])), interval.stages,
-                             f"{interval.largest_residual:.6e}", f"{interval.wall_time:.6f}", interval.halvings])
+                             f"{interval.largest_residual:.6e}", f"{interval.wall_time:.6f}", interval.halvings,
+                             repr(float(t[-1] - t[0])), f"{interval.error:.3e}"])
         self._diag_file.flush()
 
     def close(self) -> None:
