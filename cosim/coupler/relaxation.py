@@ -110,6 +110,8 @@ class RunSummary:
     rejected: int = 0  # rolled-back tries of intervals that were then retried shorter
     shortest: float = math.inf  # interval lengths, s
     longest: float = 0.0
+    round_trips: int = 0  # Run actions, rejected tries included (the subsims of one Run answer concurrently)
+    requests: int = 0  # subsim runs, rejected tries included
 
     def add(self, interval: Interval) -> None:
         self.t_end = float(interval.t[-1])
@@ -200,6 +202,12 @@ class Relaxation:
         self._ports = {n: [(p, f"{n}.{p}", w) for p, w in plan.inputs[n].items()] for n in plan.names}
         self._sizes = plan.sizes
         self._previous: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # converged inputs of the last interval
+        self.round_trips = self.requests = 0  # Run actions and subsim runs emitted so far
+
+    def _action(self, stage: int, times: np.ndarray, inputs: dict[str, dict[str, np.ndarray]]) -> Run:
+        self.round_trips += 1
+        self.requests += len(inputs)
+        return Run(stage, times, inputs)
 
     # --- the action streams -----------------------------------------------------------------------
 
@@ -216,11 +224,12 @@ class Relaxation:
             return (yield from self._auto_run(t_start, t_stop, self.settings.auto))
         H = self.settings.interval
         summary = RunSummary(t_start)
-        t = t_start
+        t, trips, requests = t_start, self.round_trips, self.requests
         while t < t_stop - 1e-9 * H:
             interval = yield from self._interval(t, interval_end(t_start, t, H))
             summary.add(interval)
             t = float(interval.t[-1])
+        summary.round_trips, summary.requests = self.round_trips - trips, self.requests - requests
         yield Done(summary)
         return summary
 
@@ -249,6 +258,7 @@ class Relaxation:
         s = self.settings
         q = order(s.interp, s.samples)
         summary = RunSummary(t_start)
+        trips, requests = self.round_trips, self.requests
         t, H = t_start, control.clip(s.interval)
         while t < t_stop - 1e-9 * H:
             rejected = 0
@@ -277,6 +287,7 @@ class Relaxation:
             if t1 - t >= H * (1 - 1e-9):  # a clipped last interval says nothing about a longer one
                 H = next_length(H, ratio, interval.stages, q, control)
             t = t1
+        summary.round_trips, summary.requests = self.round_trips - trips, self.requests - requests
         yield Done(summary)
         return summary
 
@@ -316,7 +327,7 @@ class Relaxation:
         history: dict[str, list[float]] = {}
         previous: dict[str, np.ndarray] | None = None
         for stage in range(s.max_stages):
-            outputs = yield Run(stage, times, {name: self._inputs_of(name, inputs, n) for name in plan.names})
+            outputs = yield self._action(stage, times, {name: self._inputs_of(name, inputs, n) for name in plan.names})
             if self.report_stages:
                 yield StageDone(stage, outputs)
             flat = {f"{name}.{p}": v for name, ports in outputs.items() for p, v in ports.items()}
@@ -339,7 +350,7 @@ class Relaxation:
             for name in plan.order:
                 for c in forward_into[name]:
                     inputs[str(c.target)] = self._evaluate(c, outputs, n)
-                outputs.update((yield Run(stage, times, {name: self._inputs_of(name, inputs, n)})))
+                outputs.update((yield self._action(stage, times, {name: self._inputs_of(name, inputs, n)})))
             if self.report_stages:
                 yield StageDone(stage, outputs)
             if not plan.feedback:  # nothing to iterate: a feed-forward chain is exact in one stage
