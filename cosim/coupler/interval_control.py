@@ -23,8 +23,9 @@ samples for ``Delta^n``: the estimate is then that of the degree ``n - 2`` inter
 an upper bound for smooth signals, so the controller is conservative there.
 
 Per scalar channel the estimate is compared with ``interval_tol`` times the channel's largest
-magnitude over the interval; the interval's *error ratio* is the largest such quotient over all
-coupled inputs. An interval is accepted when its ratio is <= 1.
+magnitude so far in the run (this interval included: a signal crossing zero keeps its scale); the
+interval's *error ratio* is the largest such quotient over all coupled inputs. An interval is accepted
+when its ratio is <= 1.
 
 The controller (what :class:`~cosim.coupler.relaxation.Relaxation` does with it):
 
@@ -106,18 +107,34 @@ def interpolation_error(values: np.ndarray, p: int) -> np.ndarray:
     return remainder_constant(p) * np.abs(np.diff(v, n=p + 1, axis=0)).max(axis=0)
 
 
-def error_ratio(inputs: Mapping[str, np.ndarray], scheme: str, tol: float) -> tuple[float, str]:
+def magnitudes(
+    inputs: Mapping[str, np.ndarray], seen: Mapping[str, np.ndarray] | None = None
+) -> dict[str, np.ndarray]:
+    """Per signal and channel, the largest magnitude in ``inputs`` and in ``seen`` (earlier intervals)."""
+    seen = seen or {}
+    out = {}
+    for signal, values in inputs.items():
+        m = np.abs(np.asarray(values, dtype=np.float64)).max(axis=0)
+        out[signal] = np.maximum(m, seen[signal]) if signal in seen else m
+    return out
+
+
+def error_ratio(
+    inputs: Mapping[str, np.ndarray], scheme: str, tol: float, seen: Mapping[str, np.ndarray] | None = None
+) -> tuple[float, str]:
     """The interval's error ratio (<= 1: accepted) over the coupled input signals, and the worst signal.
 
-    Each channel's estimate over ``tol`` times its largest magnitude; a channel that is zero throughout
-    has no interpolation error."""
+    Each channel's estimate over ``tol`` times its largest magnitude so far (this interval and ``seen``,
+    the earlier intervals' largest: a signal crossing zero keeps its scale); a channel that has been
+    zero throughout has no interpolation error."""
     worst, name = 0.0, ""
+    scales = magnitudes(inputs, seen)
     for signal, values in inputs.items():
         v = np.asarray(values, dtype=np.float64)
         if v.shape[0] < 3:
             continue
         est = interpolation_error(v, degree(scheme, v.shape[0]))
-        scale = tol * np.abs(v).max(axis=0)
+        scale = tol * scales[signal]
         with np.errstate(divide="ignore", invalid="ignore"):
             ratio = np.where(est > 0, est / np.where(scale > 0, scale, np.inf), 0.0)
         r = float(ratio.max(initial=0.0))

@@ -32,7 +32,14 @@ import numpy as np
 from cosim.coupler.convergence import Check, Tolerance, check
 from cosim.coupler.couplings import Coupling
 from cosim.coupler.first_guess import POLICIES, first_guess
-from cosim.coupler.interval_control import IntervalControl, error_ratio, next_length, order, retry_length
+from cosim.coupler.interval_control import (
+    IntervalControl,
+    error_ratio,
+    magnitudes,
+    next_length,
+    order,
+    retry_length,
+)
 from cosim.coupler.plan import Plan
 from cosim.signals import SCHEMES
 
@@ -203,6 +210,7 @@ class Relaxation:
         self._sizes = plan.sizes
         self._previous: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # converged inputs of the last interval
         self.round_trips = self.requests = 0  # Run actions and subsim runs emitted so far
+        self._magnitudes: dict[str, np.ndarray] = {}  # interval = "auto": largest |input| per channel so far
 
     def _action(self, stage: int, times: np.ndarray, inputs: dict[str, dict[str, np.ndarray]]) -> Run:
         self.round_trips += 1
@@ -261,7 +269,7 @@ class Relaxation:
         trips, requests = self.round_trips, self.requests
         t, H = t_start, control.clip(s.interval)
         while t < t_stop - 1e-9 * H:
-            rejected = 0
+            rejected, guessed = 0, bool(self._previous)  # the first interval's stage 0 has no extrapolation
             while True:
                 t1 = t + H
                 if t1 >= t_stop - 1e-3 * H:  # no sliver left after the last interval
@@ -275,17 +283,19 @@ class Relaxation:
                         raise
                     H, rejected = retry_length(H, math.inf, q, control), rejected + 1
                     continue
-                ratio, _ = error_ratio(interval.inputs, s.interp, control.tol)
+                ratio, _ = error_ratio(interval.inputs, s.interp, control.tol, self._magnitudes)
                 if ratio > 1.0 and H > control.minimum and t1 - t > control.minimum:
                     yield Rollback(t, t1)
                     H, rejected = retry_length(min(H, t1 - t), ratio, q, control), rejected + 1
                     continue
                 break
             interval.halvings, interval.error = rejected, ratio
+            self._magnitudes = magnitudes(interval.inputs, self._magnitudes)
             yield from self._commit(interval)
             summary.add(interval)
             if t1 - t >= H * (1 - 1e-9):  # a clipped last interval says nothing about a longer one
-                H = next_length(H, ratio, interval.stages, q, control)
+                stages = interval.stages if guessed or s.first_guess != "extrapolate" else 1  # the error decides
+                H = next_length(H, ratio, stages, q, control)
             t = t1
         summary.round_trips, summary.requests = self.round_trips - trips, self.requests - requests
         yield Done(summary)
