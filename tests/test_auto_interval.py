@@ -72,7 +72,7 @@ def test_the_interval_grows_on_an_easy_problem_and_nothing_is_rolled_back() -> N
     stages = [a.interval.stages for a in seen if isinstance(a, Commit)]
     assert not any(isinstance(a, Rollback) for a in seen)
     assert lengths[0] == pytest.approx(0.1)
-    assert lengths[1] > lengths[0] and lengths[2] > lengths[1] and lengths[3] > lengths[2]
+    assert lengths[1] > lengths[0] and lengths[2] > lengths[1] and lengths[3] > lengths[2], stages
     assert max(lengths) >= 1.5  # 15 times the first
     assert seen[-1].summary.t_end == pytest.approx(40.0) and seen[-1].summary.longest == max(lengths)
     # every interval starts where the previous one ended
