@@ -198,24 +198,32 @@ def satellite_columns(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def test_auto_satellite_agrees_with_fine_rk_u_at_least_as_well_as_rk_u_at_its_usual_step(tmp_path: Path) -> None:
-    """Case 1 to 100 s (RF-D, in-process): against RK-U at 0.025 s, the adaptive run's deviation in
-    Euler angles and position is no larger than that of RK-U at 0.1 s (both measured here)."""
+    """Case 1 to 100 s (RF-D, in-process) against RK-U at 0.025 s: the adaptive run's deviation in Euler
+    angles is no larger than that of RK-U at 0.1 s (both measured here). Position: RK-U's deviation is
+    rounding, not truncation (RK-U at 0.05 s deviates as much as at 0.1 s: R ~ 6.7e6 m carries ~1e-9 m
+    per operation), so no step can beat it reliably; the adaptive run must stay within twice it."""
     from scipy.interpolate import CubicSpline
 
     stop = 100.0
     paper = load(SATELLITE / "case1.toml")
-    fine = parse({**paper.raw, "coupling": {**paper.raw["coupling"], "samples": 17}}, paper.path)
+    fine, half = (parse({**paper.raw, "coupling": {**paper.raw["coupling"], "samples": n}}, paper.path)
+                  for n in (17, 9))
     run_unified(fine, stop=stop, output=tmp_path / "fine.csv")
+    run_unified(half, stop=stop, output=tmp_path / "half.csv")
     run_unified(paper, stop=stop, output=tmp_path / "rku.csv")
     run_scenario(load(SATELLITE / "case1-auto.toml"), stop=stop, output=tmp_path / "auto.csv", inprocess=True,
                  progress=False, log=lambda m: None)
     tf, af, rf = satellite_columns(tmp_path / "fine.csv")
+    th, ah, rh = satellite_columns(tmp_path / "half.csv")
     tu, au, ru = satellite_columns(tmp_path / "rku.csv")
     ta, aa, ra = satellite_columns(tmp_path / "auto.csv")
-    assert np.array_equal(tu, tf[::4])  # RK-U 0.1 s samples are every fourth fine one
+    assert np.array_equal(tu, tf[::4]) and np.array_equal(th, tf[::2])  # RK-U samples are fine ones
     rku_angle, rku_position = np.abs(au - af[::4]).max(), np.abs(ru - rf[::4]).max()
+    half_angle, half_position = np.abs(ah - af[::2]).max(), np.abs(rh - rf[::2]).max()
     assert ta[-1] == stop and not np.isin(ta[1:-1], tf).all()  # the adaptive grid is its own
     auto_angle = np.abs(aa - CubicSpline(tf, af)(ta)).max()
     auto_position = np.abs(ra - CubicSpline(tf, rf)(ta)).max()
     assert 0 < rku_angle and 0 < rku_position  # a comparison, not two zeros
-    assert auto_angle <= rku_angle and auto_position <= rku_position
+    assert auto_angle <= rku_angle
+    assert half_angle < rku_angle / 8 and half_position > rku_position / 2  # angles truncate, positions round
+    assert auto_position <= 2 * rku_position

@@ -23,9 +23,11 @@ samples for ``Delta^n``: the estimate is then that of the degree ``n - 2`` inter
 an upper bound for smooth signals, so the controller is conservative there.
 
 Per scalar channel the estimate is compared with ``interval_tol`` times the channel's largest
-magnitude so far in the run (this interval included: a signal crossing zero keeps its scale); the
-interval's *error ratio* is the largest such quotient over all coupled inputs. An interval is accepted
-when its ratio is <= 1.
+magnitude so far in the run (this interval included: a signal crossing zero keeps its scale), or with
+the convergence check's absolute tolerance ``res`` when that is larger (the samples are settled only to
+it: asking the interpolation to be finer would shrink intervals for nothing); the interval's *error
+ratio* is the largest such quotient over all coupled inputs. An interval is accepted when its ratio
+is <= 1.
 
 The controller (what :class:`~cosim.coupler.relaxation.Relaxation` does with it):
 
@@ -120,13 +122,16 @@ def magnitudes(
 
 
 def error_ratio(
-    inputs: Mapping[str, np.ndarray], scheme: str, tol: float, seen: Mapping[str, np.ndarray] | None = None
+    inputs: Mapping[str, np.ndarray], scheme: str, tol: float, seen: Mapping[str, np.ndarray] | None = None,
+    floor: float = 0.0,
 ) -> tuple[float, str]:
     """The interval's error ratio (<= 1: accepted) over the coupled input signals, and the worst signal.
 
     Each channel's estimate over ``tol`` times its largest magnitude so far (this interval and ``seen``,
-    the earlier intervals' largest: a signal crossing zero keeps its scale); a channel that has been
-    zero throughout has no interpolation error."""
+    the earlier intervals' largest: a signal crossing zero keeps its scale), or over ``floor`` when that
+    is larger: the convergence check's absolute tolerance, below which the samples themselves are not
+    settled, so no interval length could bring the estimate lower. A channel that has been zero
+    throughout has no interpolation error."""
     worst, name = 0.0, ""
     scales = magnitudes(inputs, seen)
     for signal, values in inputs.items():
@@ -134,7 +139,7 @@ def error_ratio(
         if v.shape[0] < 3:
             continue
         est = interpolation_error(v, degree(scheme, v.shape[0]))
-        scale = tol * scales[signal]
+        scale = np.maximum(tol * scales[signal], floor)
         with np.errstate(divide="ignore", invalid="ignore"):
             ratio = np.where(est > 0, est / np.where(scale > 0, scale, np.inf), 0.0)
         r = float(ratio.max(initial=0.0))

@@ -283,7 +283,7 @@ class Relaxation:
                         raise
                     H, rejected = retry_length(H, math.inf, q, control), rejected + 1
                     continue
-                ratio, _ = error_ratio(interval.inputs, s.interp, control.tol, self._magnitudes)
+                ratio, _ = error_ratio(interval.inputs, s.interp, control.tol, self._magnitudes, s.tol.abs)
                 if ratio > 1.0 and H > control.minimum and t1 - t > control.minimum:
                     yield Rollback(t, t1)
                     H, rejected = retry_length(min(H, t1 - t), ratio, q, control), rejected + 1
