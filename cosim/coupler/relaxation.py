@@ -224,7 +224,8 @@ class Relaxation:
         return self._run(t_start, t_stop)
 
     def interval(self, t0: float, t1: float) -> Steps:
-        """One interval ``[t0, t1]`` (shortened by halvings when allowed), ending in one ``Commit``."""
+        """One interval ``[t0, t1]`` (shortened by halvings when allowed), ending in one ``Commit``.
+        Its length is given: ``interval = "auto"`` sizes the intervals of :meth:`run` only."""
         return self._interval(t0, t1)
 
     def _run(self, t_start: float, t_stop: float) -> Generator[Action, Outputs | None, RunSummary]:
