@@ -227,3 +227,14 @@ def test_auto_satellite_agrees_with_fine_rk_u_at_least_as_well_as_rk_u_at_its_us
     assert auto_angle <= rku_angle
     assert half_angle < rku_angle / 8 and half_position > rku_position / 2  # angles truncate, positions round
     assert auto_position <= 2 * rku_position
+
+
+def test_the_cubic_first_guess_extrapolates_the_whole_segments_last_piece() -> None:
+    from cosim.coupler.first_guess import first_guess
+    from cosim.signals import Segment
+
+    t, new = np.linspace(0.0, 3.0, 33), np.linspace(3.0, 6.0, 33)
+    v = np.column_stack([np.sin(t), np.cos(3 * t)])
+    whole = Segment(t, v).interpolant("cubic")
+    guess = first_guess("extrapolate", new, {"s.u": 2}, {"s.u": (t, v)}, "cubic")["s.u"]
+    np.testing.assert_array_equal(guess, np.array([whole(x) for x in new]))
