@@ -50,7 +50,8 @@ if TYPE_CHECKING:
 __all__ = ["DIAG_COLUMNS", "ResultWriter", "column_names", "diag_path", "output_units", "read_results",
            "read_units", "recover"]
 
-DIAG_COLUMNS = ["interval", "t0", "t1", "stages", "largest_residual", "wall_time_s", "halvings", "restarts"]
+DIAG_COLUMNS = ["interval", "t0", "t1", "stages", "largest_residual", "wall_time_s", "halvings", "restarts",
+                "length_s", "error"]
 
 
 def column_names(signals: Sequence[tuple[SignalRef, int]]) -> list[str]:
@@ -134,7 +135,7 @@ class ResultWriter:
                 t = interval.t
                 line = [self._count, repr(float(t[0])), repr(float(t[-1])), interval.stages,
                         f"{interval.largest_residual:.6e}", f"{interval.wall_time:.6f}", interval.halvings,
-                        interval.restarts]
+                        interval.restarts, repr(float(t[-1] - t[0])), f"{interval.error:.3e}"]
                 self._diag.append((",".join(map(str, line)) + "\n").encode(), self._ends_at)
             except OutputWriteError:
                 self.failed = True

@@ -19,6 +19,7 @@ from typing import Any
 
 from cosim.coupler.convergence import Tolerance
 from cosim.coupler.couplings import Coupling
+from cosim.coupler.interval_control import IntervalControl
 from cosim.coupler.order import check_order
 from cosim.coupler.relaxation import METHODS, Settings
 from cosim.importing import add_search_path, load_model
@@ -68,7 +69,20 @@ KEYS: dict[str, dict[str, Key]] = {
     },
     "coupling": {
         "method": Key("string", '"centralized"', "", "default method: 'centralized' (RF-C) or 'distributed' (RF-D)"),
-        "interval": Key("number", "1.0", "s", "convergence interval length H"),
+        "interval": Key("number or \"auto\"", "1.0", "s",
+                        "convergence interval length H; 'auto': sized per interval by the interval_* keys "
+                        "(cosim/coupler/interval_control.py)"),
+        "interval_tol": Key("number", "1e-8", "1",
+                            "interval = 'auto': largest estimated interpolation error of every coupled input "
+                            "between its samples, relative to that channel's largest magnitude over the interval; "
+                            "a larger estimate rolls the interval back and retries it shorter"),
+        "interval_initial": Key("number", "0.1", "s", "interval = 'auto': length of the first interval"),
+        "interval_min": Key("number", "interval_initial / 1024", "s",
+                            "interval = 'auto': shortest interval; one that does not converge at it stops the run"),
+        "interval_max": Key("number", "interval_initial * 1024", "s", "interval = 'auto': longest interval"),
+        "interval_stages": Key("integer", "3", "",
+                               "interval = 'auto': stages per interval aimed at; the interval grows while "
+                               "intervals converge in fewer, holds at this many, shrinks above"),
         "samples": Key("integer", "5", "", "samples per interval, both ends included (the paper's ndp)"),
         "first_guess": Key("string", '"extrapolate"', "", "stage-0 inputs: 'zero', 'hold' or 'extrapolate'"),
         "interp": Key("string", '"linear"', "", "input interpolation: 'linear', 'cubic' or 'lagrange'"),
@@ -109,6 +123,7 @@ KEYS: dict[str, dict[str, Key]] = {
     },
 }
 KEYS["coupling.<method>"] = {k: v for k, v in KEYS["coupling"].items() if k != "method"}
+AUTO_KEYS = ("interval_tol", "interval_initial", "interval_min", "interval_max", "interval_stages")
 TABLES = {"coupling", "subsims", "couplings", "tolerances", "output", "unified", "run", "security"}
 
 
@@ -342,12 +357,30 @@ class _Parser:
         merged = dict(table)
         try:
             tol = Tolerance(merged.pop("tol", 1e-10), merged.pop("res", 1e-12))
+            merged.update(self.auto_interval(merged, where))
             order = merged.get("order")
             if order is not None:
                 merged["order"] = check_order(order, list(subsims))
             return Settings(tol=tol, tolerances=MappingProxyType(dict(tolerances)), **{**merged, "method": method})
         except (ValueError, TypeError) as exc:
             raise self.fail(where, str(exc)) from None
+
+    def auto_interval(self, merged: dict[str, Any], where: str) -> dict[str, Any]:
+        """Pops the interval_* keys from ``merged``; with interval = "auto" returns interval and auto."""
+        keys = {k: merged.pop(k) for k in AUTO_KEYS if k in merged}
+        if merged.get("interval") != "auto":
+            if keys:
+                raise self.fail(where, f"{sorted(keys)} need interval = \"auto\"")
+            return {}
+        for k, v in keys.items():
+            if k != "interval_stages" and (isinstance(v, bool) or not isinstance(v, (int, float))):
+                raise self.fail(f"{where}.{k}", f"must be a number, got {v!r}")
+        initial = float(keys.get("interval_initial", 0.1))
+        control = IntervalControl(tol=float(keys.get("interval_tol", 1e-8)), initial=initial,
+                                  minimum=float(keys.get("interval_min", initial / 1024)),
+                                  maximum=float(keys.get("interval_max", initial * 1024)),
+                                  stages=keys.get("interval_stages", 3))
+        return {"interval": control.initial, "auto": control}
 
     def output(self, table: Mapping[str, Any]) -> tuple[Path | None, tuple[str, ...] | None]:
         self.known(table, set(KEYS["output"]), "output")

@@ -92,7 +92,8 @@ def test_run_writes_results_and_diagnostics_and_leaves_no_process(tmp_path: Path
     assert cols == ["time", "mass1.u[0]", "mass1.v[0]", "mass2.u[0]", "mass2.v[0]"]
     assert data[0, 0] == 0.0 and data[-1, 0] == pytest.approx(0.2) and data[0, 1] == 1.0
     diag = (tmp_path / "osc.csv.diag.csv").read_text().splitlines()
-    assert diag[0] == "interval,t0,t1,stages,largest_residual,wall_time_s,halvings,restarts" and len(diag) == 1 + 4
+    assert diag[0] == "interval,t0,t1,stages,largest_residual,wall_time_s,halvings,restarts,length_s,error"
+    assert len(diag) == 1 + 4
     assert "order: mass1 -> mass2" in done.stdout and str(out) in done.stdout
     assert "%" not in done.stderr  # no progress display when stderr is not a terminal
     assert serving(tag) == []  # neither the coordinator nor any subsim it started is left

@@ -35,6 +35,9 @@ def first_guess(
         elif policy == "hold":
             guess[name] = np.tile(previous[name][1][-1], (times.size, 1))
         else:
-            at = Segment(*previous[name]).interpolant(interp)
+            t_prev, v_prev = previous[name]
+            if interp == "cubic":  # beyond its end the piecewise cubic is its last piece: the last 4 samples
+                t_prev, v_prev = t_prev[-4:], v_prev[-4:]
+            at = Segment(t_prev, v_prev).interpolant(interp)
             guess[name] = np.array([at(t) for t in times])
     return guess

@@ -22,6 +22,7 @@ A driver (``cosim.driver``) performs the actions over in-process or remote handl
 
 from __future__ import annotations
 
+import math
 from collections import Counter
 from collections.abc import Generator, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -31,6 +32,14 @@ import numpy as np
 from cosim.coupler.convergence import Check, Tolerance, check
 from cosim.coupler.couplings import Coupling
 from cosim.coupler.first_guess import POLICIES, first_guess
+from cosim.coupler.interval_control import (
+    IntervalControl,
+    error_ratio,
+    magnitudes,
+    next_length,
+    order,
+    retry_length,
+)
 from cosim.coupler.plan import Plan
 from cosim.signals import SCHEMES
 
@@ -51,6 +60,7 @@ class Settings:
     max_stages: int = 100
     order: Sequence[str] | None = None  # distributed only; derived when None
     max_halvings: int = 0
+    auto: IntervalControl | None = None  # interval = "auto": sized per interval (interval is the first one)
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
@@ -67,6 +77,11 @@ class Settings:
             raise ValueError(f"max_stages must be an integer >= 2, got {self.max_stages!r}")
         if not isinstance(self.max_halvings, int) or self.max_halvings < 0:
             raise ValueError(f"max_halvings must be an integer >= 0, got {self.max_halvings!r}")
+        if self.auto is not None:
+            if not isinstance(self.auto, IntervalControl):
+                raise ValueError(f"auto must be an IntervalControl or None, got {self.auto!r}")
+            if self.samples < 3:
+                raise ValueError(f"samples must be >= 3 with interval = 'auto', got {self.samples}")
 
 
 @dataclass
@@ -79,8 +94,13 @@ class Interval:
     stages: int
     residuals: dict[str, list[float]]  # checked signal -> largest residual per checked stage
     wall_time: float = 0.0  # set by the driver (the machine reads no clock)
-    halvings: int = 0
+    halvings: int = 0  # times this interval was rolled back and retried shorter
     restarts: int = 0  # subsims the driver replaced during this interval
+    error: float = 0.0  # interval = "auto": the error ratio (estimate / interval_tol; <= 1 accepted), else 0
+
+    @property
+    def length(self) -> float:
+        return float(self.t[-1] - self.t[0])
 
     @property
     def largest_residual(self) -> float:
@@ -95,13 +115,21 @@ class RunSummary:
     stages: Counter = field(default_factory=Counter)  # stages per interval -> count
     halved: int = 0
     wall_time: float = 0.0
+    rejected: int = 0  # rolled-back tries of intervals that were then retried shorter
+    shortest: float = math.inf  # interval lengths, s
+    longest: float = 0.0
+    round_trips: int = 0  # Run actions, rejected tries included (the subsims of one Run answer concurrently)
+    requests: int = 0  # subsim runs, rejected tries included
 
     def add(self, interval: Interval) -> None:
         self.t_end = float(interval.t[-1])
         self.intervals += 1
         self.stages[interval.stages] += 1
         self.halved += interval.halvings > 0
+        self.rejected += interval.halvings
         self.wall_time += interval.wall_time
+        self.shortest = min(self.shortest, interval.length)
+        self.longest = max(self.longest, interval.length)
 
 
 class NotConverged(RuntimeError):
@@ -187,6 +215,13 @@ class Relaxation:
         self._ports = {n: [(p, f"{n}.{p}", w) for p, w in plan.inputs[n].items()] for n in plan.names}
         self._sizes = plan.sizes
         self._previous: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # converged inputs of the last interval
+        self.round_trips = self.requests = 0  # Run actions and subsim runs emitted so far
+        self._magnitudes: dict[str, np.ndarray] = {}  # interval = "auto": largest |input| per channel so far
+
+    def _action(self, stage: int, times: np.ndarray, inputs: dict[str, dict[str, np.ndarray]]) -> Run:
+        self.round_trips += 1
+        self.requests += len(inputs)
+        return Run(stage, times, inputs)
 
     # --- the action streams -----------------------------------------------------------------------
 
@@ -195,17 +230,21 @@ class Relaxation:
         return self._run(t_start, t_stop)
 
     def interval(self, t0: float, t1: float) -> Steps:
-        """One interval ``[t0, t1]`` (shortened by halvings when allowed), ending in one ``Commit``."""
+        """One interval ``[t0, t1]`` (shortened by halvings when allowed), ending in one ``Commit``.
+        Its length is given: ``interval = "auto"`` sizes the intervals of :meth:`run` only."""
         return self._interval(t0, t1)
 
     def _run(self, t_start: float, t_stop: float) -> Generator[Action, Outputs | None, RunSummary]:
+        if self.settings.auto is not None:
+            return (yield from self._auto_run(t_start, t_stop, self.settings.auto))
         H = self.settings.interval
         summary = RunSummary(t_start)
-        t = t_start
+        t, trips, requests = t_start, self.round_trips, self.requests
         while t < t_stop - 1e-9 * H:
             interval = yield from self._interval(t, interval_end(t_start, t, H))
             summary.add(interval)
             t = float(interval.t[-1])
+        summary.round_trips, summary.requests = self.round_trips - trips, self.requests - requests
         yield Done(summary)
         return summary
 
@@ -221,6 +260,55 @@ class Relaxation:
                 if halvings == s.max_halvings:
                     raise
         interval.halvings = halvings
+        return (yield from self._commit(interval))
+
+    def _auto_run(
+        self, t_start: float, t_stop: float, control: IntervalControl
+    ) -> Generator[Action, Outputs | None, RunSummary]:
+        """``interval = "auto"``: each interval sized by :mod:`cosim.coupler.interval_control`.
+
+        A try that does not converge, or whose interpolation error estimate exceeds ``interval_tol``,
+        is rolled back and retried shorter; an accepted one sets the next length. The last interval
+        ends at ``t_stop``."""
+        s = self.settings
+        q = order(s.interp, s.samples)
+        summary = RunSummary(t_start)
+        trips, requests = self.round_trips, self.requests
+        t, H = t_start, control.clip(s.interval)
+        while t < t_stop - 1e-9 * H:
+            rejected, guessed = 0, bool(self._previous)  # the first interval's stage 0 has no extrapolation
+            while True:
+                t1 = t + H
+                if t1 >= t_stop - 1e-3 * H:  # no sliver left after the last interval
+                    t1 = t_stop
+                times = sample_times(t, t1, s.samples)
+                try:
+                    interval = yield from self._converge(times)
+                except NotConverged:
+                    yield Rollback(t, t1)
+                    if H <= control.minimum:
+                        raise
+                    H, rejected = retry_length(H, math.inf, q, control), rejected + 1
+                    continue
+                ratio, _ = error_ratio(interval.inputs, s.interp, control.tol, self._magnitudes, s.tol.abs)
+                if ratio > 1.0 and H > control.minimum and t1 - t > control.minimum:
+                    yield Rollback(t, t1)
+                    H, rejected = retry_length(min(H, t1 - t), ratio, q, control), rejected + 1
+                    continue
+                break
+            interval.halvings, interval.error = rejected, ratio
+            self._magnitudes = magnitudes(interval.inputs, self._magnitudes)
+            yield from self._commit(interval)
+            summary.add(interval)
+            if t1 - t >= H * (1 - 1e-9):  # a clipped last interval says nothing about a longer one
+                stages = interval.stages if guessed or s.first_guess != "extrapolate" else 1  # the error decides
+                H = next_length(H, ratio, stages, q, control)
+            t = t1
+        summary.round_trips, summary.requests = self.round_trips - trips, self.requests - requests
+        yield Done(summary)
+        return summary
+
+    def _commit(self, interval: Interval) -> Generator[Action, Outputs | None, Interval]:
         self._previous = {k: (interval.t, v) for k, v in interval.inputs.items()}
         yield Commit(interval)
         return interval
@@ -265,7 +353,7 @@ class Relaxation:
         history: dict[str, list[float]] = {}
         previous: dict[str, np.ndarray] | None = None
         for stage in range(s.max_stages):
-            outputs = yield Run(stage, times, {name: self._inputs_of(name, inputs, n) for name in plan.names})
+            outputs = yield self._action(stage, times, {name: self._inputs_of(name, inputs, n) for name in plan.names})
             if self.report_stages:
                 yield StageDone(stage, outputs)
             flat = {f"{name}.{p}": v for name, ports in outputs.items() for p, v in ports.items()}
@@ -288,7 +376,7 @@ class Relaxation:
             for name in plan.order:
                 for c in forward_into[name]:
                     inputs[str(c.target)] = self._evaluate(c, outputs, n)
-                outputs.update((yield Run(stage, times, {name: self._inputs_of(name, inputs, n)})))
+                outputs.update((yield self._action(stage, times, {name: self._inputs_of(name, inputs, n)})))
             if self.report_stages:
                 yield StageDone(stage, outputs)
             if not plan.feedback:  # nothing to iterate: a feed-forward chain is exact in one stage
