@@ -174,3 +174,46 @@ def test_how_long_a_cut_link_takes_to_notice(hosts: Hosts, tmp_path: Path) -> No
         _stop(watcher)
         if subsim is not None:
             _stop(subsim)
+
+
+def test_a_cut_link_is_found_by_the_deadline_and_healed_when_it_comes_back(hosts: Hosts, tmp_path: Path) -> None:
+    """The link to the remote subsim goes down for 4 s mid-run: the coordinator calls it hung within its
+    deadline, waits for it to answer again under its name, restores it and goes on; the results equal the
+    local run's, byte for byte."""
+    certs = make_certs(tmp_path / "certs", f"IP:{hosts.addr_a}")
+    scenario = tmp_path / "oscillator-remote.toml"
+    scenario.write_text(OSCILLATOR.read_text().replace("[subsims.mass2]\n", "[subsims.mass2]\nexternal = true\n"))
+    local = tmp_path / "local.csv"
+    run_scenario(load(OSCILLATOR), method="distributed", stop=40.0, output=local, progress=False, log=lambda m: None)
+
+    remote = tmp_path / "remote.csv"
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "PYTHONUNBUFFERED": "1"}
+    coordinator = subprocess.Popen(
+        [*hosts.exec(hosts.a), sys.executable, "-m", "cosim.cli", "run", str(scenario), "--method", "distributed",
+         "--stop", "40.0", "--output", str(remote), "--quiet", "--listen", f"tls/{hosts.addr_a}:7447",
+         "--tls-cert", str(certs["router_pem"]), "--tls-key", str(certs["router_key"]),
+         "--tls-ca", str(certs["ca_pem"])],
+        env=env, stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True, cwd=tmp_path)
+    subsim = None
+    try:
+        assert coordinator.stderr is not None
+        for line in coordinator.stderr:
+            if "COSIM_SECRET=" in line:
+                break
+        secrets_env, argv = _external_command(line.strip())
+        subsim = subprocess.Popen([*hosts.exec(hosts.b), *argv], env={**env, **secrets_env})
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and (not remote.exists() or len(remote.read_text().splitlines()) < 400):
+            time.sleep(0.05)  # well into the run: the deadline has adapted to the measured requests
+        assert _ip("-n", hosts.a, "link", "set", hosts.link_a, "down").returncode == 0
+        time.sleep(4.0)  # past the deadline (1.5 s), short of the 10 s lease: the subsim keeps its session
+        assert _ip("-n", hosts.a, "link", "set", hosts.link_a, "up").returncode == 0
+        _, err = coordinator.communicate(timeout=600)
+        assert coordinator.returncode == 0, err[-2000:]
+        assert "mass2 hung" in err and "replaced (1 of 2)" in err, err[-2000:]
+        assert subsim.wait(30) == 0
+    finally:
+        _stop(coordinator)
+        if subsim is not None:
+            _stop(subsim)
+    assert remote.read_bytes() == local.read_bytes()
