@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from cosim.coupler.relaxation import Interval, RunSummary
+from cosim.coupler.relaxation import Interval, RunSummary, interval_end, sample_times
 from cosim.importing import import_object
 from cosim.outputs import OutputLock, reserve_output
 from cosim.results import ResultWriter, diag_path, output_units
@@ -100,12 +100,9 @@ def _run_unified(scenario: Scenario, stop: float | None, output: Path, lock: Out
 
     summary = RunSummary(start)
     writer = ResultWriter(output, signals, units, lock=lock)
-    frac = np.arange(m) / (m - 1)
     try:
         for k in range(n_int):
-            t0, t1 = start + k * H, start + (k + 1) * H  # Coordinator.run's grid and sample_times
-            t = t0 + (t1 - t0) * frac
-            t[0], t[-1] = t0, t1
+            t = sample_times(start + k * H, interval_end(start, start + k * H, H), m)  # the coupler's own grid
             rows = slice(k * (m - 1), (k + 1) * (m - 1) + 1)
             outputs: dict[str, dict[str, np.ndarray]] = {}
             for ref, _ in signals:
