@@ -155,7 +155,7 @@ class Bus:
         if SEARCH_PATH:  # the scenario's directory and the working directory (cosim.importing)
             env["PYTHONPATH"] = os.pathsep.join([*filter(None, [env.get("PYTHONPATH")]), *SEARCH_PATH])
         popen = subprocess.Popen(
-            self.command(module, name, model, lease=lease),
+            [*self.command(module, name, model, lease=lease), "--quiet-stop"],
             env=env,
             stdout=subprocess.DEVNULL if quiet else None,
             stderr=subprocess.DEVNULL if quiet else None,

@@ -51,6 +51,9 @@ def parse_args(model_cls: type[Subsim] | Subsim, argv: Sequence[str] | None) -> 
     p.add_argument("--connect-timeout", type=float, default=10.0, help="seconds to wait for the coordinator")
     p.add_argument("--history", type=int, default=DEFAULT_HISTORY, help="committed states kept for rollback")
     p.add_argument("--lease", type=float, default=10.0, help="seconds a silent link to the coordinator lives")
+    p.add_argument("--quiet-stop", action="store_true",
+                   help="say nothing when the coordinator ends the run (cosim run passes it to the subsims it "
+                        "starts: it reports the stop itself, in one line)")
     p.add_argument("--max-request", type=int, metavar="BYTES",
                    help="refuse larger requests before decoding them (default: sized from the input ports)")
     p.add_argument("--queue", type=int, default=64, metavar="N", help="requests waiting beyond N get a 'busy' reply")
@@ -117,9 +120,11 @@ def main(model_cls: type[Subsim] | Subsim, argv: Sequence[str] | None = None) ->
         print(f"{args.name}: serving run {args.run} via {args.connect} (pid {os.getpid()})", file=sys.stderr)
         try:
             server.serve()
-            print(f"{args.name}: shutdown requested by the coordinator", file=sys.stderr)
+            if not args.quiet_stop:
+                print(f"{args.name}: shutdown requested by the coordinator", file=sys.stderr)
         except _Stop as why:
-            print(f"{args.name}: stopping on {why}", file=sys.stderr)
+            if not args.quiet_stop:
+                print(f"{args.name}: stopping on {why}", file=sys.stderr)
         finally:
             # leaving anyway: a SIGTERM now (e.g. the coordinator's token deleted right after our shutdown
             # reply) must not interrupt the clean-up and turn exit code 0 into a traceback

@@ -53,7 +53,8 @@ def test_run_id_attach_line_and_shutdown_of_the_external_subsim(tmp_path: Path, 
     assert attach["endpoint"].startswith("tcp/127.0.0.1:")
     command = attach["command"]
     assert command[:4] == ["python", "-m", "cosim.serve", "subsims.oscillator.subsim:Mass"]
-    user = subprocess.Popen([sys.executable, *command[1:]], stderr=subprocess.PIPE, text=True)
+    user = subprocess.Popen([sys.executable, *command[1:]], stderr=subprocess.PIPE, text=True,
+                            env={**os.environ, **attach["env"]})  # the run's key and login for this subsim
     procs.append(user)
     coord.communicate(timeout=120)
     assert coord.returncode == 0

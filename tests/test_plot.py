@@ -43,7 +43,10 @@ def drawn(monkeypatch: pytest.MonkeyPatch) -> dict[str, dict]:
 
     def record(fig: Figure, path, *args, **kwargs):  # noqa: ANN001, ANN202 - matplotlib's signature
         axes = fig.get_axes()
-        seen[Path(path).name] = {
+        name = Path(getattr(path, "name", path)).name  # a path, or the file object of an atomic write:
+        if name.startswith(".") and ".tmp-" in name:  # ".<name>.tmp-<pid>" becomes <name>
+            name = name[1:].rsplit(".tmp-", 1)[0]
+        seen[name] = {
             "title": axes[0].get_title(),
             "xlabel": axes[-1].get_xlabel(),
             "ylabels": [ax.get_ylabel() for ax in axes],

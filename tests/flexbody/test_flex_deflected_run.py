@@ -75,7 +75,10 @@ def adapter_run(h: float) -> dict[str, np.ndarray]:
     fb = FlexBody()
     y0 = fb.initial_state({**PARAMS, "h": h})
 
-    def u(t: float) -> dict[str, np.ndarray]:
+    def u(t: float | np.ndarray) -> dict[str, np.ndarray]:  # a time, or an array of them (one row each)
+        if np.ndim(t):
+            rows = [u(float(x)) for x in t]
+            return {k: np.array([r[k] for r in rows]) for k in rows[0]}
         f0, tau0, fp = loads(t)
         return {"f0": f0, "tau0": tau0, "fp": fp.ravel()}
 

@@ -243,7 +243,7 @@ def test_python_m_subsims_fmu_serves_the_fmu_given_on_the_command_line(fmus: dic
     configure, and configure needs no ``fmu`` parameter."""
     cmd = [sys.executable, "-m", "subsims.fmu", str(fmus["mass3"]), "--connect", cosim_bus.endpoint,
            "--run", cosim_bus.run, "--name", "m1"]
-    proc = subprocess.Popen(cmd, env=dict(os.environ))
+    proc = subprocess.Popen(cmd, env={**os.environ, **cosim_bus.subsim_env("m1")})  # its key and the login
     handle = None
     try:
         handle = cosim_bus.attach("m1", timeout=30.0, wait=30.0)
