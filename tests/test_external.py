@@ -4,6 +4,7 @@ subsim it started receives ``shutdown`` when the run ends."""
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from collections.abc import Iterator
