@@ -7,16 +7,16 @@ from typing import Any
 
 import numpy as np
 
-from cosim.subsim import InputFunction, Port, Subsim
+from cosim.subsim import InputFunction, Param, Port, Subsim
 from subsims.aero.model import AeroParams, aero_loads
 from subsims.numerics import input_rows
+from subsims.satellite import constants as C
 
 
 class Aero(Subsim):
     """Six-facet box in free-molecular drag, constant density. Algebraic: evaluated at the sample times only.
 
-    Parameters (all optional, paper's values by default): ``rho`` (kg/m^3), ``cd``, ``length``, ``width``,
-    ``height`` (m, box along body x, y, z).
+    Parameters (``params``; all optional, the paper's values by default).
     """
 
     name = "aero"
@@ -28,6 +28,14 @@ class Aero(Subsim):
     outputs = {
         "force": Port(3, "N", "aerodynamic force, body (= geometric) axes, acting at the geometric origin"),
         "torque": Port(3, "N m", "aerodynamic torque about the geometric origin, body axes"),
+    }
+
+    params = {  # the names of model.PARAM_NAMES; defaults those of AeroParams.from_mapping (spec §7.6)
+        "rho": Param(C.RHO, "kg/m^3", "atmospheric density, constant, >= 0"),
+        "cd": Param(C.CD, "", "drag coefficient, the same for all facets, >= 0"),
+        "length": Param(C.BOX_LENGTH, "m", "box along body x, > 0"),
+        "width": Param(C.BOX_WIDTH, "m", "box along body y, > 0"),
+        "height": Param(C.BOX_HEIGHT, "m", "box along body z, > 0"),
     }
 
     def initial_state(self, params: Mapping[str, Any]) -> np.ndarray:

@@ -7,20 +7,25 @@ from typing import Any
 
 import numpy as np
 
-from cosim.subsim import InputFunction, Port, Subsim
+from cosim.subsim import InputFunction, Param, Port, Subsim
 from subsims.integrator.model import integrate_twice
 from subsims.integrator.subsim import _vector
 
 
 class DoubleIntegrator(Subsim):
-    """y'' = u. Parameters: ``size`` (default 1), ``y0``, ``v0`` (default zeros). State: (y, v)."""
+    """y'' = u. Parameters in ``params``. State: (y, v)."""
 
     name = "double_integrator"
     inputs = {"u": Port(1, "", "second derivative of y")}
     outputs = {"y": Port(1), "v": Port(1)}
+    params = {
+        "size": Param(1, "", "width of u, y and v"),
+        "y0": Param(0.0, "", "y at the start time: a list of size numbers, or one number for all"),
+        "v0": Param(0.0, "", "v = y' at the start time: a list of size numbers, or one number for all"),
+    }
 
     def initial_state(self, params: Mapping[str, Any]) -> np.ndarray:
-        self.size = size = int(params.get("size", 1))
+        self.size = size = int(params["size"])
         self.inputs = {"u": Port(size, "", "second derivative of y")}
         self.outputs = {"y": Port(size), "v": Port(size)}
         return np.concatenate([_vector(params, "y0", size), _vector(params, "v0", size)])

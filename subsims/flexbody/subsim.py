@@ -27,12 +27,56 @@ from typing import Any
 
 import numpy as np
 
-from cosim.subsim import InputFunction, ModelError, Port, Subsim
+from cosim.subsim import InputFunction, ModelError, Param, Port, Subsim
+from subsims.adapters import Unset, unset_by_default
 from subsims.flexbody.appendage import appendage_accelerations, inertia_split
 from subsims.flexbody.config import FlexSetup, build
 from subsims.flexbody.model import Loads, integrate, integrate_samples
 from subsims.flexbody.outputs import appendage_outputs, free_outputs
+from subsims.flexbody.vehicle import SAMPLE_VEHICLE
 from subsims.numerics import as_table
+
+_V = SAMPLE_VEHICLE
+
+# Every name config.build reads: the keys of SAMPLE_VEHICLE (with its values as defaults) but the report's &RUN
+# values t_end, print_dt, plot_dt, which the model does not read, and config.OPTIONAL_KEYS (default None: not set).
+# Units are those of the default units = "slug-ft-lbf-s" (the model itself is unit-agnostic).
+PARAMS: dict[str, Param] = {
+    "mode": Param(_V["mode"], "", '"free" (the whole vehicle, spec mode F), "attitude" (the appendage driven by the '
+                  'base\'s angular motion, mode C) or "base" (prescribed base motion, mode B)'),
+    "units": Param(_V["units"], "", 'unit system of the port labels only: "slug-ft-lbf-s" or "kg-m-N-s"'),
+    "m_b": Param(_V["m_b"], "slug", "base mass, > 0"),
+    "I_b": Param(_V["I_b"], "slug*ft^2", "base inertia about the base mass centre, body axes, 3x3 symmetric "
+                 "positive definite"),
+    "s": Param(_V["s"], "ft", "base mass centre from O_g, body axes"),
+    "masses": Param(_V["masses"], "slug", "the n particle masses, > 0"),
+    "r": Param(_V["r"], "ft", "undeformed particle positions from O_g, body axes, n x 3"),
+    "n_modes": Param(_V["n_modes"], "", "t, the retained constrained modes, 0 <= t <= 3n (0: rigid vehicle, "
+                     "mode free only)"),
+    "booms": Param(_V["booms"], "", "boom builder (when K, omega2/Phi are not set): each boom's particle numbers "
+                   "1..n, root to tip"),
+    "boom_L": Param(_V["boom_L"], "ft", "boom builder: the k-th particle of a boom sits k boom_L from its clamp"),
+    "EI_x": Param(_V["EI_x"], "lbf*ft^2", "boom builder: bending stiffness, deflection along x"),
+    "EI_z": Param(_V["EI_z"], "lbf*ft^2", "boom builder: bending stiffness, deflection along z"),
+    "EA": Param(_V["EA"], "lbf", "boom builder: axial stiffness, along y"),
+    "mass_order": Param(_V["mass_order"], "", "the report's categories (chapter 4) kept in A: 1, 2 or 3"),
+    "kin_order": Param(_V["kin_order"], "", "the report's categories (chapter 4) kept in U: 1, 2 or 3"),
+    "modal_damping": Param(_V["modal_damping"], "", "modal damping ratio zeta_k, one for all or t values, >= 0"),
+    "R0": Param(_V["R0"], "ft", "initial position of O_g, inertial"),
+    "euler123_deg": Param(_V["euler123_deg"], "deg", "initial 1-2-3 Euler angles (the report's THETA)"),
+    "V0": Param(_V["V0"], "ft/s", "initial velocity of O_g, body axes (the report's UVW)"),
+    "omega_deg_s": Param(_V["omega_deg_s"], "deg/s", "initial body angular velocity (the report's OMEGA)"),
+    "h": Param(_V["h"], "s", "fixed RK4 step, > 0"),
+    "K": Param(None, "lbf/ft", "stiffness matrix, 3n x 3n (first match wins: K, then omega2 with Phi, then the "
+               "boom builder); not set: the next"),
+    "omega2": Param(None, "rad^2/s^2", "supplied constrained modes: squared frequencies (with Phi)"),
+    "Phi": Param(None, "slug^-0.5", "supplied constrained modes: mass-normalized shapes, 3n x len(omega2) (with "
+                 "omega2)"),
+    "q0": Param(None, "ft", "initial particle deflections, n x 3, projected as eta = Phi^T M q; not set: zero"),
+    "q_dot0": Param(None, "ft/s", "initial particle deflection rates, n x 3, projected; not set: zero"),
+    "eta0": Param(None, "slug^0.5*ft", "initial modal coordinates (t), instead of q0; not set: from q0"),
+    "eta_dot0": Param(None, "slug^0.5*ft/s", "initial modal rates (t), instead of q_dot0; not set: from q_dot0"),
+}
 
 
 def _ports(setup: FlexSetup) -> tuple[dict[str, Port], dict[str, Port]]:
@@ -117,9 +161,10 @@ class FlexBody(Subsim):
 
     name = "flexbody"
     inputs, outputs = _ports(build({}))
+    params = PARAMS
 
     def initial_state(self, params: Mapping[str, Any]) -> np.ndarray:
-        setup = build(params)
+        setup = build(Unset(params, unset_by_default(self.params)))
         if setup.mode != "free" and setup.model.t == 0:
             raise ValueError(f"parameter 'n_modes' must be >= 1 in mode {setup.mode!r}")
         self.setup = setup

@@ -32,7 +32,8 @@ Parameters (all optional; missing keys take these defaults):
   UVW), ``omega_deg_s`` (body OMEGA, deg/s); elastic: ``q0``, ``q_dot0`` (n x 3 physical, projected as
   eta = Phi^T M q) or ``eta0``, ``eta_dot0`` (t); default zero as in the report's INITL.
 - ``h``: fixed RK4 step (the report's DT = 0.01 s).
-- ``t_end``, ``print_dt``, ``plot_dt``: the report's &RUN values for the scenario; not read by the model.
+- ``t_end``, ``print_dt``, ``plot_dt``: the report's &RUN values for the scenario; not read by the model, so not
+  declared by the subsim either (a scenario sets its own ``stop``; given as subsim parameters they are refused).
 """
 
 from __future__ import annotations

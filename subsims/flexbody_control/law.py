@@ -25,6 +25,14 @@ DEFAULT_CONTROL: dict[str, Any] = {
 }
 
 
+def merged_params(params: Mapping[str, Any]) -> dict[str, Any]:
+    """``DEFAULT_CONTROL`` overlaid with ``params``; unknown names raise ValueError."""
+    unknown = sorted(set(params) - set(DEFAULT_CONTROL))
+    if unknown:
+        raise ValueError(f"unknown flexbody_control parameter(s) {unknown}; known: {', '.join(DEFAULT_CONTROL)}")
+    return {**DEFAULT_CONTROL, **params}
+
+
 @dataclass(frozen=True, eq=False)
 class ControlParams:
     law: str
@@ -39,10 +47,7 @@ class ControlParams:
     @classmethod
     def from_mapping(cls, params: Mapping[str, Any]) -> ControlParams:
         """Defaults ``DEFAULT_CONTROL``; unknown names and bad shapes raise ValueError naming the parameter."""
-        unknown = sorted(set(params) - set(DEFAULT_CONTROL))
-        if unknown:
-            raise ValueError(f"unknown flexbody_control parameter(s) {unknown}; known: {', '.join(DEFAULT_CONTROL)}")
-        p = {**DEFAULT_CONTROL, **params}
+        p = merged_params(params)
         if p["law"] not in LAWS:
             raise ValueError(f"parameter 'law' must be one of {LAWS}, got {p['law']!r}")
 

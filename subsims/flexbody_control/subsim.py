@@ -17,8 +17,8 @@ from typing import Any
 
 import numpy as np
 
-from cosim.subsim import InputFunction, Port, Subsim
-from subsims.flexbody_control.law import ControlParams, control_torque
+from cosim.subsim import InputFunction, Param, Port, Subsim
+from subsims.flexbody_control.law import DEFAULT_CONTROL, ControlParams, control_torque
 from subsims.numerics import input_rows
 
 
@@ -32,6 +32,18 @@ class AttitudeControl(Subsim):
         "omega": Port(3, "rad/s", "flexbody body rates"),
     }
     outputs = {"tau0": Port(3, "lbf*ft", "control torque at O_g, body axes")}
+    params = {  # the keys of law.DEFAULT_CONTROL, with its values; units of the flexbody's slug-ft-lbf-s
+        "law": Param(DEFAULT_CONTROL["law"], "", '"pd": tau0 = -(kp (theta - theta_cmd) + kd omega), or "bang_bang": '
+                     "open loop (spec AT-10)"),
+        "kp": Param(DEFAULT_CONTROL["kp"], "lbf*ft/rad", "pd: angle gains per body axis"),
+        "kd": Param(DEFAULT_CONTROL["kd"], "lbf*ft*s/rad", "pd: rate gains per body axis"),
+        "theta_cmd_deg": Param(DEFAULT_CONTROL["theta_cmd_deg"], "deg", "pd: commanded 1-2-3 Euler angles"),
+        "torque": Param(DEFAULT_CONTROL["torque"], "lbf*ft", "bang_bang: torque at O_g, body axes, for t_on <= t < "
+                        "t_switch; minus it for t_switch <= t < t_off; zero otherwise"),
+        "t_on": Param(DEFAULT_CONTROL["t_on"], "s", "bang_bang: start of the torque, t_on <= t_switch"),
+        "t_switch": Param(DEFAULT_CONTROL["t_switch"], "s", "bang_bang: the torque reverses, t_switch <= t_off"),
+        "t_off": Param(DEFAULT_CONTROL["t_off"], "s", "bang_bang: end of the torque"),
+    }
 
     def initial_state(self, params: Mapping[str, Any]) -> np.ndarray:
         self.p = ControlParams.from_mapping(params)

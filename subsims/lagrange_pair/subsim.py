@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from cosim.subsim import InputFunction, ModelError, Port, Subsim
+from cosim.subsim import InputFunction, ModelError, Param, Port, Subsim
 from subsims.lagrange_pair import model
 from subsims.numerics import as_table
 
@@ -44,6 +44,42 @@ OUTPUT_PORTS: dict[str, Port] = {
 
 assert tuple(OUTPUT_PORTS) == model.OUTPUT_NAMES
 
+_UNIT_AND_DOC: dict[str, tuple[str, str]] = {  # the keys of model.DEFAULT_PARAMS (the CHOSEN configuration)
+    "formulation": ("", '"stabilized" (the minimal 30-state form), "velocity_only" (33) or "unstabilized" (36)'),
+    "aero": ("", "built-in aerodynamics of the listing (false when a separate aero subsim supplies the loads)"),
+    "gravity": ("", "flat-Earth gravity (aero and gravity both false: the listing's IFE = 0)"),
+    "integrator": ("", '"rk4" (fixed-step classical Runge-Kutta, RUNGF) or "euler" (for comparisons only)'),
+    "dt": ("s", "largest integration sub-step (DELT), > 0"),
+    "g": ("ft/s^2", "gravity; also converts the weights to masses (MASS = WGHT/g), > 0"),
+    "weight_B": ("lbf", "SRB weight, > 0"),
+    "inertia_B": ("slug*ft^2", "SRB inertia about its CM, B axes: Ixx, Iyy, Izz, Ixy, Ixz, Iyz (positive definite)"),
+    "weight_C": ("lbf", "parachute weight, > 0"),
+    "inertia_C": ("slug*ft^2", "parachute inertia about its CM, C axes: Ixx, Iyy, Izz, Ixy, Ixz, Iyz"),
+    "attach_B": ("ft", "SRB CM -> swivel, B axes (XATTB, YATTB, ZATTB)"),
+    "attach_C": ("ft", "parachute (canopy) CM -> swivel, C axes (XATTC, YATTC, ZATTC)"),
+    "speed_B": ("ft/s", "initial SRB speed (VIBS)"),
+    "azimuth_B_deg": ("deg", "initial SRB flight-path azimuth, from north toward east (AZIIBS)"),
+    "flight_path_B_deg": ("deg", "initial SRB flight-path angle, positive up (GAMIBS)"),
+    "altitude_B": ("ft", "initial SRB altitude (ALTBS): R_B(0) = [0, 0, -altitude_B]"),
+    "rates_B_deg": ("deg/s", "initial SRB body rates p, q, r (PDEGBS, QDEGBS, RDEGBS)"),
+    "alpha_B_deg": ("deg", "initial SRB total angle of attack (ALPHBS)"),
+    "phia_B_deg": ("deg", "initial SRB aerodynamic roll angle (PHIABS)"),
+    "bank_B_deg": ("deg", "initial SRB bank angle (BANKBS)"),
+    "rates_C_deg": ("deg/s", "initial parachute body rates p, q, r"),
+    "euler_C_deg": ("deg", "initial parachute 3-2-1 Euler angles psi, theta, phi (PSICS, ...)"),
+    "x0": ("", "the initial state vector itself (30, 33 or 36 numbers by formulation), instead of the initial "
+           "conditions above; not set: from them"),
+}
+assert tuple(_UNIT_AND_DOC) == tuple(model.DEFAULT_PARAMS)
+
+
+def _plain(value: Any) -> Any:
+    """A default as a scenario would give it: tuples as lists."""
+    return list(value) if isinstance(value, tuple) else value
+
+
+PARAMS: dict[str, Param] = {k: Param(_plain(model.DEFAULT_PARAMS[k]), *ud) for k, ud in _UNIT_AND_DOC.items()}
+
 
 class LagrangePair(Subsim):
     """Two rigid bodies (SRB and drogue) on a frictionless swivel, Watts' drift-free Lagrange-multiplier form.
@@ -60,6 +96,7 @@ class LagrangePair(Subsim):
     name = "lagrange_pair"
     inputs = INPUT_PORTS
     outputs = OUTPUT_PORTS
+    params = PARAMS
 
     def initial_state(self, params: Mapping[str, Any]) -> np.ndarray:
         self.model, self.dt, self.integrator, x0 = model.setup(params)
