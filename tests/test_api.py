@@ -13,6 +13,8 @@ import cosim
 from cosim.results import DIAG_COLUMNS, read_results
 from cosim.scenario import ScenarioError
 
+pytestmark = [pytest.mark.slow]  # the inner loop: pytest -m "not slow"
+
 ROOT = Path(__file__).parents[1]
 OSCILLATOR = ROOT / "scenarios" / "oscillator.toml"
 CASE1 = ROOT / "scenarios" / "satellite" / "case1.toml"

@@ -28,6 +28,8 @@ from cosim.protocol.transport.session import client_config
 from cosim.runtime import Runtime
 from subsims.integrator.subsim import Integrator
 
+pytestmark = [pytest.mark.slow]  # the inner loop: pytest -m "not slow"
+
 
 class BrokenRuntime(Runtime):
     def run_interval(self, t, inputs, interp="linear", commit=False):

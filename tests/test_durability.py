@@ -26,6 +26,8 @@ from cosim import __version__
 from cosim.outputs import AppendFile, OutputWriteError, atomic_write, stream_path
 from cosim.results import read_results, read_units
 
+pytestmark = [pytest.mark.slow]  # the inner loop: pytest -m "not slow"
+
 ROOT = Path(__file__).parents[1]
 OSCILLATOR = ROOT / "scenarios" / "oscillator.toml"
 COSIM = [sys.executable, "-m", "cosim.cli"]

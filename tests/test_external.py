@@ -14,6 +14,8 @@ import pytest
 
 from cosim.results import read_results
 
+pytestmark = [pytest.mark.slow]  # the inner loop: pytest -m "not slow"
+
 ROOT = Path(__file__).parents[1]
 OSCILLATOR = ROOT / "scenarios" / "oscillator.toml"
 COSIM = [sys.executable, "-m", "cosim.cli"]

@@ -18,6 +18,8 @@ from cosim.protocol.messages import decode_reply, encode_request, next_seq, open
 from cosim.protocol.service import CAP_FLOOR, default_request_cap
 from cosim.subsim import Port
 
+pytestmark = [pytest.mark.slow]  # the inner loop: pytest -m "not slow"
+
 ROOT = Path(__file__).parents[1]
 T = np.array([0.0, 0.5])
 

@@ -102,6 +102,7 @@ POINTS = [
 ]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("method", "victim", "moment", "k"), POINTS)
 def test_a_killed_subsim_is_replaced_and_the_results_are_bit_identical(
     undisturbed: dict, method: str, victim: str, moment: str, k: int
@@ -134,6 +135,7 @@ def test_a_killed_subsim_is_replaced_and_the_results_are_bit_identical(
         assert ring.fingerprint() == undisturbed[method]
 
 
+@pytest.mark.slow
 def test_a_stopped_subsim_is_found_by_its_deadline_and_replaced(undisturbed: dict) -> None:
     with Bus.open() as bus:
         ring = Ring(bus, "centralized", restarts=3)
@@ -161,6 +163,7 @@ def test_a_stopped_subsim_is_found_by_its_deadline_and_replaced(undisturbed: dic
         assert len(hung_b) == 1, ring.log
 
 
+@pytest.mark.slow
 def test_with_no_restarts_left_the_failure_stops_the_run() -> None:
     with Bus.open() as bus:
         ring = Ring(bus, "distributed", restarts=0)
@@ -178,6 +181,7 @@ def children(pid: int) -> list[int]:
     return out
 
 
+@pytest.mark.slow
 def test_cosim_run_replaces_a_killed_subsim_and_writes_the_same_csv(tmp_path: Path) -> None:
     """End to end: `cosim run` of the two-mass oscillator, one mass SIGKILLed mid-run; the CSV is byte-identical."""
     scenario = Path(__file__).resolve().parents[1] / "scenarios" / "oscillator.toml"
@@ -209,6 +213,7 @@ def test_cosim_run_replaces_a_killed_subsim_and_writes_the_same_csv(tmp_path: Pa
     assert read_results(tmp_path / "hurt.csv")[1].shape[0] > 100
 
 
+@pytest.mark.slow
 def test_a_model_stuck_in_advance_is_found_and_the_run_fails_when_every_replacement_sticks_too() -> None:
     """The replacement is configured the same way, so it hangs again: after the restarts the run stops with
     the hang named (it does not wait for zenoh's 60 s query timeout)."""
@@ -223,6 +228,7 @@ def test_a_model_stuck_in_advance_is_found_and_the_run_fails_when_every_replacem
         assert time.monotonic() - started < 20  # two 1 s deadlines and a restart, not a 30 s model
 
 
+@pytest.mark.slow
 def test_an_external_subsim_that_disappears_is_waited_for_and_restored(tmp_path: Path) -> None:
     """`cosim run` with mass2 external: the 'user' starts it, it is killed mid-run, the user starts it again with
     the same command; the run goes on and the CSV equals an undisturbed run's."""

@@ -28,6 +28,8 @@ from cosim.protocol.transport.session import client_config
 from cosim.runner import run_scenario
 from cosim.scenario import load
 
+pytestmark = [pytest.mark.slow]  # the inner loop: pytest -m "not slow"
+
 ROOT = Path(__file__).parents[1]
 OSCILLATOR = ROOT / "scenarios" / "oscillator.toml"
 

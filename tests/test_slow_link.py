@@ -12,6 +12,8 @@ from types import ModuleType
 
 import pytest
 
+pytestmark = [pytest.mark.slow]  # the inner loop: pytest -m "not slow"
+
 DELAY = 0.05  # s each way: large against loopback and scheduling noise, so the property is clear-cut
 
 

@@ -15,6 +15,8 @@ from cosim.launch import Bus
 from cosim.protocol.security import ClientSecurity, Security, zenoh_login
 from cosim.protocol.transport.session import client_config
 
+pytestmark = [pytest.mark.slow]  # the inner loop: pytest -m "not slow"
+
 T = np.array([0.0, 0.5])
 
 

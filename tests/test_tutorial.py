@@ -23,6 +23,8 @@ from scipy.linalg import expm
 
 from cosim.results import read_results
 
+pytestmark = [pytest.mark.slow]  # the inner loop: pytest -m "not slow"
+
 TUTORIAL = Path(__file__).parents[1] / "docs" / "tutorial.md"
 BLOCK = re.compile(r"(?:<!-- (?P<marker>[^>]*?) -->\n)?```(?P<lang>\w*)\n(?P<body>.*?)```", re.S)
 

@@ -31,6 +31,8 @@ from certs import make_certs
 from cosim.runner import run_scenario
 from cosim.scenario import load
 
+pytestmark = [pytest.mark.slow]  # the inner loop: pytest -m "not slow"
+
 ROOT = Path(__file__).parents[1]
 OSCILLATOR = ROOT / "scenarios" / "oscillator.toml"
 

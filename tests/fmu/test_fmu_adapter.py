@@ -238,6 +238,7 @@ def test_bad_fmu_does_not_crash_a_served_subsim(fmus: dict[str, Path], cosim_bus
     assert list(desc.outputs) == ["u", "v"]
 
 
+@pytest.mark.slow
 def test_python_m_subsims_fmu_serves_the_fmu_given_on_the_command_line(fmus: dict[str, Path], cosim_bus) -> None:
     """``python -m subsims.fmu mass3.fmu --connect EP --run RUN --name m1``: the ports are known before
     configure, and configure needs no ``fmu`` parameter."""

@@ -18,6 +18,8 @@ from cosim.results import read_results
 from cosim.runner import run_scenario
 from cosim.scenario import load
 
+pytestmark = [pytest.mark.slow]  # the inner loop: pytest -m "not slow"
+
 K12 = 16 * np.pi**2  # the middle spring
 K = 20 * np.pi**2  # each mass's own spring plus the middle one
 SCENARIOS = Path(__file__).resolve().parents[2] / "scenarios" / "fmu"

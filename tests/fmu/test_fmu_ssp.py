@@ -15,6 +15,8 @@ from cosim.runner import run_scenario
 from cosim.scenario import ScenarioError, load
 from subsims.fmu.ssp import read_ssp
 
+pytestmark = [pytest.mark.slow]  # the inner loop: pytest -m "not slow"
+
 SCENARIOS = Path(__file__).resolve().parents[2] / "scenarios" / "fmu"
 K12 = 16 * np.pi**2
 K = 20 * np.pi**2
