@@ -12,6 +12,8 @@ import pytest
 
 from cosim.launch import subsim_command
 
+pytestmark = [pytest.mark.slow]  # the inner loop: pytest -m "not slow"
+
 ROOT = Path(__file__).parents[1]
 
 # A subsim with two protocol bugs, served by hand (as a subsim in another language would be): it
@@ -27,8 +29,6 @@ from cosim.protocol.transport.server import CommandServer
 from cosim.protocol.transport.session import client_config
 from cosim.runtime import Runtime
 from subsims.integrator.subsim import Integrator
-
-pytestmark = [pytest.mark.slow]  # the inner loop: pytest -m "not slow"
 
 
 class BrokenRuntime(Runtime):

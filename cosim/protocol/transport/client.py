@@ -15,18 +15,21 @@ from cosim.protocol.keys import alive_key, check_name, rpc_key
 from cosim.protocol.messages import ErrorInfo, decode_reply, encode_request, next_seq, open_reply, seal_request
 
 FAST_QUERY_TIMEOUT = 4.0  # seconds: zenoh's own timeout of requests whose deadline is at most half of it
+GONE_GRACE = 0.3  # seconds a request may still be answered after its subsim's liveliness token went
 
 
 class _Pending:
     """One request in flight: its reply channel, the token that can cancel it, and its deadline."""
 
-    __slots__ = ("replies", "token", "expires", "hung")
+    __slots__ = ("replies", "token", "expires", "hung", "gone")
 
     def __init__(self, replies: Any, token: zenoh.CancellationToken, expires: float | None) -> None:
-        self.replies, self.token, self.expires, self.hung = replies, token, expires, False
+        self.replies, self.token, self.expires = replies, token, expires
+        self.hung = False
+        self.gone = False  # the subsim's liveliness token went while this was in flight
 
-    def cancel(self, hung: bool) -> None:
-        self.hung = hung
+    def cancel(self) -> None:
+        self.hung = not self.gone
         self.token.cancel()  # closes the reply channel: the waiting caller wakes with no reply
 
 
@@ -63,7 +66,7 @@ class _Watchdog:
             for key, pending in list(self._watched.items()):
                 if pending.expires is not None and now >= pending.expires:
                     self._watched.pop(key, None)
-                    pending.cancel(hung=True)
+                    pending.cancel()
 
 
 _WATCHDOG = _Watchdog()
@@ -109,8 +112,13 @@ class RemoteHandle(SubsimHandle):
         else:
             self._alive.clear()
             self._died.set()
-            for pending in list(self._in_flight):  # wake every waiter now: no reply will come
-                pending.cancel(hung=False)
+            # no reply will come, unless one is already on its way (a subsim replies to shutdown, then leaves):
+            # give that one a moment, then wake the waiter
+            soon = time.monotonic() + GONE_GRACE
+            for pending in list(self._in_flight):
+                pending.gone = True
+                pending.expires = soon if pending.expires is None else min(pending.expires, soon)
+                _WATCHDOG.watch(pending)
 
     @property
     def alive(self) -> bool:
