@@ -19,8 +19,8 @@ COSIM = [sys.executable, "-m", "cosim.cli"]
      ["[subsims.mass1.params]", "unknown parameter(s) 'mass'", "this model takes: m,"]),
     ("v0 = 0.0, idiv = 1 }\n\n[subsims.mass2]", "v0 = 0.0, idvi = 1 }\n\n[subsims.mass2]",
      ["[subsims.mass1.params]", "'idvi' (did you mean 'idiv'?)"]),
-    # a misspelled table
-    ('[[couplings]]\nto = "mass2.F"', '[[coupling]]\nto = "mass2.F"', ["[coupling]", "must be a table"]),
+    # a misspelled table name that breaks the TOML itself
+    ('[[couplings]]\nto = "mass2.F"', '[[coupling]]\nto = "mass2.F"', ["not valid TOML", "line 37"]),
 ])
 def test_a_mistake_in_the_scenario_is_one_line_naming_it(tmp_path: Path, old: str, new: str, words: list[str]) -> None:
     text = OSCILLATOR.read_text()
