@@ -9,6 +9,9 @@
 
 from __future__ import annotations
 
+import subprocess
+from collections.abc import Iterator
+
 import pytest
 
 BUS_FIXTURES = {"cosim_bus", "spawn_subsim"}
@@ -18,3 +21,14 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     for item in items:
         if BUS_FIXTURES & set(getattr(item, "fixturenames", ())):
             item.add_marker(pytest.mark.zenoh)
+
+
+@pytest.fixture
+def procs() -> Iterator[list[subprocess.Popen]]:
+    """Processes a test starts by hand: killed (if still running) and reaped when the test ends, even on failure."""
+    started: list[subprocess.Popen] = []
+    yield started
+    for p in started:
+        if p.poll() is None:
+            p.kill()
+        p.communicate()

@@ -7,7 +7,6 @@ import json
 import os
 import subprocess
 import sys
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -20,15 +19,6 @@ ROOT = Path(__file__).parents[1]
 OSCILLATOR = ROOT / "scenarios" / "oscillator.toml"
 COSIM = [sys.executable, "-m", "cosim.cli"]
 
-
-@pytest.fixture
-def procs() -> Iterator[list[subprocess.Popen]]:
-    started: list[subprocess.Popen] = []
-    yield started
-    for p in started:
-        if p.poll() is None:
-            p.kill()
-        p.wait()
 
 
 def external_scenario(tmp_path: Path) -> Path:

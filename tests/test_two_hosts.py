@@ -109,21 +109,27 @@ def _external_command(stderr_line: str) -> tuple[dict[str, str], list[str]]:
     return env, [sys.executable, *argv[1:]]
 
 
-def test_a_subsim_attached_from_another_host_over_tls_gives_the_local_results(hosts: Hosts, tmp_path: Path) -> None:
+def _local_and_remote_run(hosts: Hosts, tmp_path: Path, stop: float) -> tuple[Path, Path, subprocess.Popen, dict]:
+    """The oscillator run here to ``stop`` (the reference), and ``cosim run`` of it in namespace a over TLS with
+    mass2 external: (local results, remote results, the coordinator, the environment for the remote subsim)."""
     certs = make_certs(tmp_path / "certs", f"IP:{hosts.addr_a}")
     scenario = tmp_path / "oscillator-remote.toml"
     scenario.write_text(OSCILLATOR.read_text().replace("[subsims.mass2]\n", "[subsims.mass2]\nexternal = true\n"))
     local = tmp_path / "local.csv"
-    run_scenario(load(OSCILLATOR), method="distributed", stop=1.0, output=local, progress=False, log=lambda m: None)
-
+    run_scenario(load(OSCILLATOR), method="distributed", stop=stop, output=local, progress=False, log=lambda m: None)
     remote = tmp_path / "remote.csv"
     env = {**os.environ, "PYTHONPATH": str(ROOT), "PYTHONUNBUFFERED": "1"}
     coordinator = subprocess.Popen(
         [*hosts.exec(hosts.a), sys.executable, "-m", "cosim.cli", "run", str(scenario), "--method", "distributed",
-         "--stop", "1.0", "--output", str(remote), "--quiet", "--listen", f"tls/{hosts.addr_a}:7447",
+         "--stop", str(stop), "--output", str(remote), "--quiet", "--listen", f"tls/{hosts.addr_a}:7447",
          "--tls-cert", str(certs["router_pem"]), "--tls-key", str(certs["router_key"]),
          "--tls-ca", str(certs["ca_pem"])],
         env=env, stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True, cwd=tmp_path)
+    return local, remote, coordinator, env
+
+
+def test_a_subsim_attached_from_another_host_over_tls_gives_the_local_results(hosts: Hosts, tmp_path: Path) -> None:
+    local, remote, coordinator, env = _local_and_remote_run(hosts, tmp_path, 1.0)
     subsim = None
     try:
         assert coordinator.stderr is not None
@@ -182,20 +188,7 @@ def test_a_cut_link_is_found_by_the_deadline_and_healed_when_it_comes_back(hosts
     """The link to the remote subsim goes down for 4 s mid-run: the coordinator calls it hung within its
     deadline, waits for it to answer again under its name, restores it and goes on; the results equal the
     local run's, byte for byte."""
-    certs = make_certs(tmp_path / "certs", f"IP:{hosts.addr_a}")
-    scenario = tmp_path / "oscillator-remote.toml"
-    scenario.write_text(OSCILLATOR.read_text().replace("[subsims.mass2]\n", "[subsims.mass2]\nexternal = true\n"))
-    local = tmp_path / "local.csv"
-    run_scenario(load(OSCILLATOR), method="distributed", stop=40.0, output=local, progress=False, log=lambda m: None)
-
-    remote = tmp_path / "remote.csv"
-    env = {**os.environ, "PYTHONPATH": str(ROOT), "PYTHONUNBUFFERED": "1"}
-    coordinator = subprocess.Popen(
-        [*hosts.exec(hosts.a), sys.executable, "-m", "cosim.cli", "run", str(scenario), "--method", "distributed",
-         "--stop", "40.0", "--output", str(remote), "--quiet", "--listen", f"tls/{hosts.addr_a}:7447",
-         "--tls-cert", str(certs["router_pem"]), "--tls-key", str(certs["router_key"]),
-         "--tls-ca", str(certs["ca_pem"])],
-        env=env, stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True, cwd=tmp_path)
+    local, remote, coordinator, env = _local_and_remote_run(hosts, tmp_path, 40.0)
     subsim = None
     try:
         assert coordinator.stderr is not None
