@@ -207,7 +207,7 @@ class Coordinator:
     def commit_pending(self) -> None:
         """Commit, in one concurrent round trip, the converged trials still waiting for a next interval."""
         names = [n for n in self.handles if n in self._uncommitted]
-        self._gather({n: self.handles[n].start_commit() for n in names}, "commit")
+        self._gather({n: self.handles[n].start_commit() for n in names})
         self._uncommitted.clear()
 
     # --- performing the machine's actions -------------------------------------------------------
@@ -262,7 +262,7 @@ class Coordinator:
             except SubsimError as exc:  # it was known to be gone before sending
                 pending[name] = _raiser(exc)
         try:
-            results = self._gather(pending, "run_interval", replace=True)
+            results = self._gather(pending, replace=True)
         except _Replaced as replaced:  # who answered has committed what rode on the request
             uncommitted.difference_update(replaced.answered)
             raise
@@ -270,7 +270,7 @@ class Coordinator:
         uncommitted.difference_update(results)
         return {name: r.outputs for name, r in results.items()}
 
-    def _gather(self, pending: Mapping[str, Callable[[], object]], what: str, replace: bool = False) -> dict:
+    def _gather(self, pending: Mapping[str, Callable[[], object]], replace: bool = False) -> dict:
         """Wait for every pending request; replace the subsims that died or hung (when a recovery is set and
         restarts are left), then raise :class:`_Replaced` if ``replace``; raise any other error."""
         results, errors = {}, {}

@@ -8,7 +8,6 @@ import subprocess
 import sys
 import time
 import uuid
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -49,14 +48,14 @@ def serving(tag: bytes) -> list[int]:
     return pids
 
 
-def test_serving_sees_only_the_tagged_processes(popen_cleanup: list) -> None:
+def test_serving_sees_only_the_tagged_processes(procs: list) -> None:
     """The finder can fail: it sees a tagged child and its grandchild, and not an untagged sibling."""
     tag, env = tagged()
     code = "import subprocess, sys, time; subprocess.Popen([sys.executable, '-c', 'import time; time.sleep(60)']); " \
            "time.sleep(60)"
     parent = subprocess.Popen([sys.executable, "-c", code], env=env)
     other = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
-    popen_cleanup += [parent, other]
+    procs += [parent, other]
     deadline = time.monotonic() + 30
     while len(serving(tag)) < 2 and time.monotonic() < deadline:
         time.sleep(0.05)
@@ -69,16 +68,6 @@ def test_serving_sees_only_the_tagged_processes(popen_cleanup: list) -> None:
     while serving(tag) and time.monotonic() < deadline:  # the grandchild is reaped by init
         time.sleep(0.05)
     assert serving(tag) == []
-
-
-@pytest.fixture
-def popen_cleanup() -> Iterator[list[subprocess.Popen]]:
-    procs: list[subprocess.Popen] = []
-    yield procs
-    for p in procs:
-        if p.poll() is None:
-            p.kill()
-        p.wait()
 
 
 @pytest.mark.zenoh
@@ -109,12 +98,12 @@ def test_npz_output_by_suffix_in_process(tmp_path: Path) -> None:
 
 
 @pytest.mark.zenoh
-def test_ctrl_c_keeps_committed_results_and_cleans_up(tmp_path: Path, popen_cleanup: list) -> None:
+def test_ctrl_c_keeps_committed_results_and_cleans_up(tmp_path: Path, procs: list) -> None:
     out = tmp_path / "long.csv"
     tag, env = tagged()
     proc = subprocess.Popen([*COSIM, "run", str(OSCILLATOR), "--stop", "1000", "--output", str(out)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
-    popen_cleanup.append(proc)
+    procs.append(proc)
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline and (not out.exists() or len(out.read_text().splitlines()) < 50):
         time.sleep(0.1)
@@ -178,7 +167,7 @@ def test_describe_prints_order_and_feedback_edges() -> None:
 
 
 @pytest.mark.zenoh
-def test_external_subsim_started_by_hand(tmp_path: Path, popen_cleanup: list) -> None:
+def test_external_subsim_started_by_hand(tmp_path: Path, procs: list) -> None:
     """The coordinator prints the command; a 'user' starts it as a separate process."""
     sc = tmp_path / "ext.toml"
     text = OSCILLATOR.read_text()
@@ -187,7 +176,7 @@ def test_external_subsim_started_by_hand(tmp_path: Path, popen_cleanup: list) ->
     out = tmp_path / "ext.csv"
     coord = subprocess.Popen([*COSIM, "run", str(sc), "--stop", "0.2", "--output", str(out), "--quiet"],
                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    popen_cleanup.append(coord)
+    procs.append(coord)
     command, env = None, {}
     for line in coord.stderr:
         words = line.split()
@@ -198,7 +187,7 @@ def test_external_subsim_started_by_hand(tmp_path: Path, popen_cleanup: list) ->
     assert command is not None and "--connect" in command and "mass2" in command
     assert set(env) == {"COSIM_SECRET", "COSIM_ZENOH_AUTH"}  # the secrets travel in the environment
     user = subprocess.Popen([sys.executable, *command[1:]], stderr=subprocess.DEVNULL, env={**os.environ, **env})
-    popen_cleanup.append(user)
+    procs.append(user)
     stdout, _ = coord.communicate(timeout=120)
     assert coord.returncode == 0
     _, data = read_results(out)
