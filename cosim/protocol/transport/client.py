@@ -21,10 +21,11 @@ GONE_GRACE = 0.3  # seconds a request may still be answered after its subsim's l
 class _Pending:
     """One request in flight: its reply channel, the token that can cancel it, and its deadline."""
 
-    __slots__ = ("replies", "token", "expires", "hung", "gone")
+    __slots__ = ("replies", "token", "expires", "hung", "gone", "timeout_at")
 
-    def __init__(self, replies: Any, token: zenoh.CancellationToken, expires: float | None) -> None:
+    def __init__(self, replies: Any, token: zenoh.CancellationToken, expires: float | None, timeout_at: float) -> None:
         self.replies, self.token, self.expires = replies, token, expires
+        self.timeout_at = timeout_at  # when zenoh's own timeout of the query ends it
         self.hung = False
         self.gone = False  # the subsim's liveliness token went while this was in flight
 
@@ -150,13 +151,15 @@ class RemoteHandle(SubsimHandle):
         seq, payload = self._seal(encode_request(cmd, args))
         token = zenoh.CancellationToken()
         deadline = self.deadline
+        now = time.monotonic()
         if deadline is not None and 2 * deadline <= FAST_QUERY_TIMEOUT <= self.timeout:
             replies = self._querier.get(payload=payload, cancellation_token=token)
+            limit = FAST_QUERY_TIMEOUT
         else:
             limit = self.timeout if deadline is None else min(self.timeout, max(2 * deadline, FAST_QUERY_TIMEOUT))
             replies = self.session.get(self._key, payload=payload, timeout=limit, cancellation_token=token,
                                        consolidation=zenoh.ConsolidationMode.NONE)
-        pending = _Pending(replies, token, None if deadline is None else time.monotonic() + deadline)
+        pending = _Pending(replies, token, None if deadline is None else now + deadline, now + limit)
         self._in_flight.add(pending)
         if deadline is not None:
             _WATCHDOG.watch(pending)
@@ -206,8 +209,11 @@ class RemoteHandle(SubsimHandle):
         if forged:
             raise SubsimError("unauthenticated", f"{forged} reply(ies) without this subsim's tag: is it running with "
                               "the key cosim gave it (COSIM_SECRET)?", self.name, cmd)
-        # zero replies: nobody serves the key (not started, or died mid-request)
+        # zero replies: nobody serves the key (not started, or died mid-request), or zenoh's timeout ended the
+        # query without its error reply (seen under load)
         self._died.wait(0.5 if self._alive.is_set() else 0.0)
+        if not self._died.is_set() and self._alive.is_set() and time.monotonic() >= pending.timeout_at:
+            raise SubsimError("timeout", f"no reply within {self.timeout:g} s", self.name, cmd)
         reason = "the process died during the request" if self._died.is_set() else "no process serves this subsim"
         raise SubsimDied("no_responder", reason, self.name, cmd)
 
