@@ -152,9 +152,11 @@ def _linear(times: np.ndarray, values: np.ndarray) -> Interpolant:
 
 
 def _barycentric_weights(x: np.ndarray) -> np.ndarray:
-    diff = x[:, None] - x[None, :]
-    np.fill_diagonal(diff, 1.0)
-    return 1.0 / np.prod(diff, axis=1)
+    """Weights 1 / prod_{j != k} (x_k - x_j) of the nodes ``x`` (..., k): of every row at once."""
+    diff = x[..., :, None] - x[..., None, :]
+    k = x.shape[-1]
+    diff[..., range(k), range(k)] = 1.0
+    return 1.0 / np.prod(diff, axis=-1)
 
 
 def _barycentric_sum(c: np.ndarray, vals: np.ndarray) -> np.ndarray:
@@ -212,20 +214,16 @@ def _cubic(times: np.ndarray, values: np.ndarray) -> Interpolant:
     n = times.size
     if n <= 4:
         return _barycentric(times, values)
-    grid = times.tolist()
-    pieces = [_barycentric(times[s : s + 4], values[s : s + 4]) for s in range(n - 3)]
     node = np.arange(n - 3)[:, None] + np.arange(4)
     x, vals = times[node], values[node]  # (n-3, 4) nodes and (n-3, 4, m) values of each piece
-    w = np.array([_barycentric_weights(xp) for xp in x])  # as each piece computes its own
+    w = _barycentric_weights(x)  # each piece's own weights, all pieces in one go
+    inner = times[2:-2]
 
-    def at(t: float) -> np.ndarray:
-        i = min(max(bisect.bisect_right(grid, t) - 1, 0), n - 2)
-        return pieces[min(max(i - 1, 0), n - 4)](t)
+    def batch(ts: np.ndarray) -> np.ndarray:  # piece min(max(i - 1, 0), n - 4) of step i
+        return _barycentric_batch(ts, x, w, vals, np.searchsorted(inner, ts, side="right"))
 
-    def batch(ts: np.ndarray) -> np.ndarray:  # piece min(max(i - 1, 0), n - 4) of step i, as the scalar picks
-        return _barycentric_batch(ts, x, w, vals, np.searchsorted(times[2:-2], ts, side="right"))
-
-    return _vectorized(at, batch)
+    # one time is a batch of one: the same operations, so the same bits
+    return _vectorized(lambda t: batch(np.array([t]))[0], batch)
 
 
 _BUILDERS: dict[str, Callable[[np.ndarray, np.ndarray], Interpolant]] = {

@@ -13,7 +13,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from cosim.signals import Segment
+from cosim.signals import interpolant
 
 POLICIES = ("zero", "hold", "extrapolate")
 
@@ -38,6 +38,6 @@ def first_guess(
             t_prev, v_prev = previous[name]
             if interp == "cubic":  # beyond its end the piecewise cubic is its last piece: the last 4 samples
                 t_prev, v_prev = t_prev[-4:], v_prev[-4:]
-            at = Segment(t_prev, v_prev).interpolant(interp)
-            guess[name] = np.array([at(t) for t in times])
+            # the previous interval's converged input: checked data already; all times in one call
+            guess[name] = interpolant(t_prev, v_prev, interp)(times)
     return guess

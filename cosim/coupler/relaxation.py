@@ -343,8 +343,8 @@ class Relaxation:
     def _check(self, new: dict, old: dict, history: dict[str, list[float]]) -> Check:
         """The convergence check of one stage; appends each signal's largest residual to ``history``."""
         result = check(new, old, self.settings.tol, self.settings.tolerances)
-        for k, r in result.residuals.items():
-            history.setdefault(k, []).append(float(r.max(initial=0.0)))
+        for k, r in result.largest_each.items():
+            history.setdefault(k, []).append(r)
         return result
 
     def _centralized(self, times: np.ndarray) -> Generator[Action, Outputs | None, Interval]:
