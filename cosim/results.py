@@ -127,7 +127,7 @@ class ResultWriter:
                 if self._npz:
                     self._data.append(rows.astype("<f8").tobytes(), self._ends_at)
                 else:
-                    self._data.append("".join(_fmt(r) for r in rows).encode(), self._ends_at)
+                    self._data.append("".join(_fmt(r) for r in rows.tolist()).encode(), self._ends_at)
                 if rows.shape[0]:
                     self.t_last = float(rows[-1, 0])
                 self.rows_written += rows.shape[0]
@@ -170,8 +170,8 @@ class ResultWriter:
                 f.close(sync=not self.failed)
 
 
-def _fmt(row: np.ndarray) -> str:
-    return ",".join(repr(float(x)) for x in row) + "\n"
+def _fmt(row: list[float]) -> str:
+    return ",".join(map(repr, row)) + "\n"  # repr: the shortest text that reads back to the same float
 
 
 def read_results(path: str | Path) -> tuple[list[str], np.ndarray]:
