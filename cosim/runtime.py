@@ -294,7 +294,7 @@ class Runtime:
     def _input_function(
         self, times: np.ndarray, inputs: Mapping[str, Any], interp: str
     ) -> Callable[[float | np.ndarray], dict[str, np.ndarray]]:
-        if not isinstance(inputs, Mapping):
+        if type(inputs) is not dict and not isinstance(inputs, Mapping):  # (the common case without the ABC check)
             raise CosimError("bad_value", "inputs must be a map of input name -> samples")
         if inputs.keys() != self.inputs.keys():
             self._wrong_input_names(inputs)
@@ -315,7 +315,7 @@ class Runtime:
             columns.append(v)
             slices[name] = slice(start, start + port.size)
             start += port.size
-        values = columns[0] if len(columns) == 1 else np.hstack(columns)
+        values = columns[0] if len(columns) == 1 else np.concatenate(columns, axis=1)
         if not np.isfinite(values).all():  # one check for all inputs; name the first bad one
             bad = next(n for n, c in zip(self.inputs, columns) if not np.isfinite(c).all())
             raise CosimError("bad_value", f"inputs.{bad}: contains NaN or inf")
@@ -347,8 +347,11 @@ class Runtime:
                 raise CosimError(
                     "internal", f"advance() output {name!r} has shape {v.shape}, expected ({times.size}, {port.size})"
                 )
-            if not np.isfinite(v).all():
-                i = int(np.argwhere(~np.isfinite(v))[0][0])
-                raise CosimError("model_error", f"output {name!r} is not finite at t={times[i]!r}")
             checked[name] = v
+        together = np.concatenate(list(checked.values()), axis=1) if len(checked) > 1 else None
+        if together is None or not np.isfinite(together).all():  # one check for all; then name the bad one
+            for name, v in checked.items():
+                if not np.isfinite(v).all():
+                    i = int(np.argwhere(~np.isfinite(v))[0][0])
+                    raise CosimError("model_error", f"output {name!r} is not finite at t={times[i]!r}")
         return checked

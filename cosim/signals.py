@@ -142,11 +142,13 @@ def _linear(times: np.ndarray, values: np.ndarray) -> Interpolant:
         # exact at both ends of the step (w = 0 or 1), and no overflow of values[i + 1] - values[i]
         return (1.0 - w) * values[i] + w * values[i + 1]
 
+    inner, step = times[1:-1], times[1:] - times[:-1]  # step[i] is the scalar's grid[i + 1] - grid[i]
+    left, right = values[:-1], values[1:]
+
     def batch(ts: np.ndarray) -> np.ndarray:
-        i = np.searchsorted(times[1:-1], ts, side="right")  # = the scalar's clipped bisect_right(grid, t) - 1
-        lo = times[i]
-        w = ((ts - lo) / (times[i + 1] - lo))[:, None]
-        return (1.0 - w) * values[i] + w * values[i + 1]
+        i = np.searchsorted(inner, ts, side="right")  # = the scalar's clipped bisect_right(grid, t) - 1
+        w = ((ts - times[i]) / step[i])[:, None]
+        return (1.0 - w) * left[i] + w * right[i]
 
     return _vectorized(at, batch)
 
