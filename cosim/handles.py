@@ -53,6 +53,10 @@ class IntervalResult:
     end_time: float
 
 
+def _interval_result(r: dict) -> IntervalResult:
+    return IntervalResult(r["t"], r["outputs"], r["end_time"])
+
+
 @dataclass(frozen=True)
 class SubsimState:
     time: float
@@ -87,7 +91,7 @@ class SubsimHandle:
         if commit:
             args["commit"] = True
         wait = self._begin("run_interval", args)
-        return lambda: (lambda r: IntervalResult(r["t"], r["outputs"], r["end_time"]))(wait())
+        return lambda: _interval_result(wait())
 
     def run_interval(
         self, times: np.ndarray, inputs: Mapping[str, np.ndarray], interp: str = "linear", commit: bool = False

@@ -3,13 +3,27 @@ the nesting depth of params, the bit-exact start time, the order of a request's 
 
 from __future__ import annotations
 
+import hashlib
+import hmac
+
 import msgpack
 import numpy as np
 import pytest
 
 from cosim.contract import ProtocolError, SubsimError
 from cosim.handles import InProcessHandle
-from cosim.protocol.messages import decode_reply, decode_request, encode_request, encode_result
+from cosim.protocol.messages import (
+    REQUESTS,
+    Request,
+    decode_reply,
+    decode_request,
+    encode_request,
+    encode_result,
+    open_reply,
+    open_request,
+    seal_reply,
+    seal_request,
+)
 from cosim.protocol.service import answer
 from cosim.protocol.wire import MAX_NESTING
 from cosim.runtime import Runtime
@@ -112,3 +126,30 @@ def test_run_interval_checks_in_the_documented_order(args: dict, code: str, word
     rt.configure({})
     info = decode_reply("run_interval", answer(rt, payload))
     assert info.code == code and words in info.message, info.message
+
+
+def test_sealed_frames_are_the_bytes_of_section_4_1() -> None:
+    key, seq, body = bytes(range(32)), 2**63 + 5, encode_request("status")
+    seq8 = seq.to_bytes(8, "big")
+    frame = seal_request(key, seq, body)
+    assert frame == body + seq8 + hmac.new(key, b"cosim-request\0" + seq8 + body, hashlib.sha256).digest()
+    assert open_request(key, frame) == (seq, body)
+    reply = encode_result({"time": 1.0})
+    sealed = seal_reply(key, seq, reply)
+    assert sealed == reply + hmac.new(key, b"cosim-reply\0" + seq8 + reply, hashlib.sha256).digest()
+    assert open_reply(key, seq, sealed) == reply
+    for bad in (frame[:-1] + bytes([frame[-1] ^ 1]), frame[:39], b""):
+        assert open_request(key, bad) is None
+    assert open_reply(key, seq + 1, sealed) is None and open_reply(key, seq, sealed[:31]) is None
+    assert open_request(bytes(32), frame) is None and open_reply(bytes(32), seq, sealed) is None
+
+
+def test_a_command_without_arguments_decodes_alike_in_any_spelling() -> None:
+    for cmd in REQUESTS:
+        if REQUESTS[cmd]:
+            continue
+        body = encode_request(cmd)
+        assert body == msgpack.packb({"v": 1, "cmd": cmd, "args": {}})
+        reordered = pairs(("args", {}), ("cmd", cmd), ("v", 1))
+        for payload in (body, memoryview(body), reordered, pairs(("v", 1), ("cmd", cmd))):
+            assert decode_request(payload) == Request(cmd, {})

@@ -10,7 +10,7 @@ from __future__ import annotations
 import logging
 from collections import Counter
 from collections.abc import Mapping
-from dataclasses import dataclass
+from typing import NamedTuple
 
 from cosim.contract import CosimError
 from cosim.protocol.messages import (
@@ -18,9 +18,8 @@ from cosim.protocol.messages import (
     decode_request,
     encode_error,
     encode_result,
-    open_request,
     request_command,
-    seal_reply,
+    sealer,
 )
 from cosim.runtime import Runtime
 from cosim.subsim import Port
@@ -59,8 +58,7 @@ def default_request_cap(inputs: Mapping[str, Port]) -> int:
     return max(CAP_FLOOR, CAP_FACTOR * (8 * values + 256 * (1 + len(inputs))))
 
 
-@dataclass(frozen=True)
-class Admitted:
+class Admitted(NamedTuple):  # a tuple: a fraction of a frozen dataclass's cost, one per request
     """A request whose size and tag passed; ``seq`` is -1 when the gate has no key."""
 
     seq: int
@@ -81,21 +79,32 @@ class Gate:
 
     def __init__(self, runtime: Runtime, key: bytes | None, max_request: int | None = None) -> None:
         self.runtime, self.key, self.max_request = runtime, key, max_request
+        self._sealer = None if key is None else sealer(key)
+        self._cap_inputs: Mapping[str, Port] | None = None  # the ports the cached default cap is for
+        self._default_cap = 0
         self.last_seq = -1  # the highest sequence number accepted
         self._recent: set[int] = set()  # those accepted within the window below it
         self.counts: Counter[str] = Counter()
 
     @property
     def cap(self) -> int:
-        return self.max_request if self.max_request is not None else default_request_cap(self.runtime.inputs)
+        if self.max_request is not None:
+            return self.max_request
+        inputs = self.runtime.inputs  # replaced, never changed in place, when a configure changes the ports
+        if inputs is not self._cap_inputs:
+            self._cap_inputs, self._default_cap = inputs, default_request_cap(inputs)
+        return self._default_cap
 
     def admit(self, frame: bytes) -> tuple[Admitted | None, bytes | None]:
         """``(request, None)`` to queue; ``(None, reply)`` to send at once; ``(None, None)`` to drop."""
-        opened = (-1, frame) if self.key is None else open_request(self.key, frame)
-        if opened is None:
-            self.counts["dropped"] += 1
-            return None, None
-        seq, body = opened
+        if self._sealer is None:
+            seq, body = -1, frame
+        else:
+            opened = self._sealer.open_request(frame)
+            if opened is None:
+                self.counts["dropped"] += 1
+                return None, None
+            seq, body = opened
         cap = self.cap
         if len(body) > cap:
             self.counts["too_large"] += 1
@@ -106,10 +115,13 @@ class Gate:
 
     def answer(self, request: Admitted) -> bytes | None:
         """The sealed reply, or ``None`` for a replayed request (dropped)."""
-        if self.key is not None and not self._fresh(request.seq):
+        seq, body = request
+        if self._sealer is None:
+            return answer(self.runtime, body)
+        if not self._fresh(seq):
             self.counts["replayed"] += 1
             return None
-        return self._seal(request.seq, answer(self.runtime, request.body))
+        return self._sealer.seal_reply(seq, answer(self.runtime, body))
 
     def _fresh(self, seq: int) -> bool:
         """Accept ``seq`` once, and only within the window below the highest accepted."""
@@ -132,7 +144,7 @@ class Gate:
         return self._seal(seq, encode_error(code, message, self.runtime.name, "?"))
 
     def _seal(self, seq: int, body: bytes) -> bytes:
-        return body if self.key is None else seal_reply(self.key, seq, body)
+        return body if self._sealer is None else self._sealer.seal_reply(seq, body)
 
 
 __all__ = ["SEAL_BYTES", "Admitted", "Gate", "answer", "default_request_cap"]

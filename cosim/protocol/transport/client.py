@@ -5,6 +5,7 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Callable
+from functools import partial
 from typing import Any
 
 import zenoh
@@ -12,7 +13,7 @@ import zenoh
 from cosim.contract import ProtocolError, SubsimDied, SubsimError, SubsimHung
 from cosim.handles import SubsimHandle
 from cosim.protocol.keys import alive_key, check_name, rpc_key
-from cosim.protocol.messages import ErrorInfo, decode_reply, encode_request, next_seq, open_reply, seal_request
+from cosim.protocol.messages import ErrorInfo, decode_reply, encode_request, next_seq, sealer
 
 FAST_QUERY_TIMEOUT = 4.0  # seconds: zenoh's own timeout of requests whose deadline is at most half of it
 GONE_GRACE = 0.3  # seconds a request may still be answered after its subsim's liveliness token went
@@ -89,6 +90,7 @@ class RemoteHandle(SubsimHandle):
     ) -> None:
         self.session, self.run, self.name = session, run, check_name(name, "subsim name")
         self._secret = key
+        self._sealer = None if key is None else sealer(key)
         self._key = rpc_key(run, name)
         self.timeout = timeout
         self.deadline: float | None = None
@@ -163,59 +165,65 @@ class RemoteHandle(SubsimHandle):
         self._in_flight.add(pending)
         if deadline is not None:
             _WATCHDOG.watch(pending)
-        return lambda: self._finish(cmd, seq, pending, deadline)
+        return partial(self._finish, cmd, seq, pending, deadline)  # one frame less per request than a lambda
 
     def _seal(self, body: bytes) -> tuple[int, bytes]:
-        if self._secret is None:
+        if self._sealer is None:
             return -1, body
         seq = next_seq()
-        return seq, seal_request(self._secret, seq, body)
+        return seq, self._sealer.seal_request(seq, body)
 
     def _open(self, seq: int, frame: bytes) -> bytes | memoryview | None:
-        return frame if self._secret is None else open_reply(self._secret, seq, frame)
+        return frame if self._sealer is None else self._sealer.open_reply(seq, frame)
 
     def _finish(self, cmd: str, seq: int, pending: _Pending, deadline: float | None) -> dict:
         # blocks on the reply channel until the reply or the end of the query (zenoh's timeout, a death, or the
         # watchdog's cancel at the deadline); a waiting coordinator leaves the cores to the subsims
         try:
-            return self._first_genuine(cmd, seq, pending, deadline)
+            forged = 0
+            for reply in pending.replies:
+                ok = reply.ok
+                if ok is None:
+                    raise self._zenoh_error(cmd, reply)
+                body = self._open(seq, ok.payload.to_bytes())
+                if body is None:  # not sealed with this subsim's key for this request: not from our subsim
+                    forged += 1
+                    continue
+                try:
+                    result = decode_reply(cmd, body)
+                except ProtocolError as exc:
+                    raise SubsimError(exc.code, f"malformed reply: {exc.message}", self.name, cmd) from None
+                if isinstance(result, ErrorInfo):
+                    raise SubsimError(result.code, result.message, result.subsim,
+                                      cmd if result.command == "?" else result.command, result.traceback)
+                return result
+            raise self._no_reply(cmd, pending, deadline, forged)
         finally:
             self._in_flight.discard(pending)
             _WATCHDOG.forget(pending)
 
-    def _first_genuine(self, cmd: str, seq: int, pending: _Pending, deadline: float | None) -> dict:
-        forged = 0
-        for reply in pending.replies:
-            if reply.ok is None:
-                text = reply.err.payload.to_bytes().decode(errors="replace")
-                if self._died.is_set():
-                    raise SubsimDied("no_responder", f"the process died during the request ({text})", self.name, cmd)
-                raise SubsimError("timeout", f"no reply within {self.timeout:g} s ({text})", self.name, cmd)
-            body = self._open(seq, reply.ok.payload.to_bytes())
-            if body is None:  # not sealed with this subsim's key for this request: not from our subsim
-                forged += 1
-                continue
-            try:
-                result = decode_reply(cmd, body)
-            except ProtocolError as exc:
-                raise SubsimError(exc.code, f"malformed reply: {exc.message}", self.name, cmd) from None
-            if isinstance(result, ErrorInfo):
-                raise SubsimError(result.code, result.message, result.subsim,
-                                  cmd if result.command == "?" else result.command, result.traceback)
-            return result
+    def _zenoh_error(self, cmd: str, reply: zenoh.Reply) -> SubsimError:
+        """What an error reply from zenoh itself (not from the subsim) means."""
+        text = reply.err.payload.to_bytes().decode(errors="replace")
+        if self._died.is_set():
+            return SubsimDied("no_responder", f"the process died during the request ({text})", self.name, cmd)
+        return SubsimError("timeout", f"no reply within {self.timeout:g} s ({text})", self.name, cmd)
+
+    def _no_reply(self, cmd: str, pending: _Pending, deadline: float | None, forged: int) -> SubsimError:
+        """Why the query ended without a genuine reply."""
         if pending.hung:
-            raise SubsimHung("timeout", f"no reply within the {deadline:g} s deadline (hung or stopped?)",
-                             self.name, cmd)
+            return SubsimHung("timeout", f"no reply within the {deadline:g} s deadline (hung or stopped?)",
+                              self.name, cmd)
         if forged:
-            raise SubsimError("unauthenticated", f"{forged} reply(ies) without this subsim's tag: is it running with "
-                              "the key cosim gave it (COSIM_SECRET)?", self.name, cmd)
+            return SubsimError("unauthenticated", f"{forged} reply(ies) without this subsim's tag: is it running "
+                               "with the key cosim gave it (COSIM_SECRET)?", self.name, cmd)
         # zero replies: nobody serves the key (not started, or died mid-request), or zenoh's timeout ended the
         # query without its error reply (seen under load)
         self._died.wait(0.5 if self._alive.is_set() else 0.0)
         if not self._died.is_set() and self._alive.is_set() and time.monotonic() >= pending.timeout_at:
-            raise SubsimError("timeout", f"no reply within {self.timeout:g} s", self.name, cmd)
+            return SubsimError("timeout", f"no reply within {self.timeout:g} s", self.name, cmd)
         reason = "the process died during the request" if self._died.is_set() else "no process serves this subsim"
-        raise SubsimDied("no_responder", reason, self.name, cmd)
+        return SubsimDied("no_responder", reason, self.name, cmd)
 
     def close(self) -> None:
         for entity in (self._querier, self._liveliness):
