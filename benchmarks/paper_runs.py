@@ -134,8 +134,8 @@ def physics_per_stage(case: int, repeats: int = 2000) -> dict[str, float]:
     force, radius, torque, velocity = (0.01, 0.02, 0.03), x_orbit[:3], (0.0, 1e-4, 0.0), (10.0, 7600.0, 5.0)
     times = [0.1 * j for j in range(5)]
     work = {
-        "orbit": lambda: orbit_integrate(orbit, x_orbit, times, lambda t: force),
-        "attitude": lambda: attitude_integrate(attitude, x_attitude, times, lambda t: (radius, torque)),
+        "orbit": lambda: orbit_integrate(orbit, x_orbit, times, lambda ts: force),
+        "attitude": lambda: attitude_integrate(attitude, x_attitude, times, lambda ts: [(radius, torque)] * ts.size),
         "aero": lambda: [aero_loads(velocity, aero, aero.facets) for _ in times],
     }
     seconds = {}
