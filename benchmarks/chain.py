@@ -5,14 +5,16 @@ Mass i feels its neighbours through coupling springs, F_i = k_c (u_{i-1} + u_{i+
 starts displaced. Distributed coupling (RF-D) over Zenoh. For each N it prints the order's feedback
 signals, the time to derive the order, the stages per interval, and the marginal wall time per
 interval (the run to ``--stop`` minus the run to ``--stop / 10``, so start-up cancels), then the
-growth from the smallest to the largest N. Asserts nothing.
+growth from the smallest to the largest N. The sizes run interleaved, ``--repeats`` times, and the growth is
+taken per repeat (median and range), so a load drift hits every N alike. Asserts nothing.
 
-    python benchmarks/chain.py [--sizes 4 8 16] [--stop 2.0] [--method distributed]
+    python benchmarks/chain.py [--sizes 4 8 16] [--stop 5.0] [--repeats 3] [--method distributed]
 """
 
 from __future__ import annotations
 
 import argparse
+import statistics
 import tempfile
 import time
 from pathlib import Path
@@ -50,32 +52,41 @@ def timed_run(scenario: Scenario, method: str, stop: float, out: Path) -> tuple[
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--sizes", type=int, nargs="+", default=[4, 8, 16])
-    p.add_argument("--stop", type=float, default=2.0)
+    p.add_argument("--stop", type=float, default=5.0)
+    p.add_argument("--repeats", type=int, default=3)
     p.add_argument("--method", default="distributed", choices=["distributed", "centralized"])
     a = p.parse_args()
-    rows = []
+    scenarios = {n: chain_scenario(n, a.method, a.stop) for n in a.sizes}
+    order_info = {}
+    for n, sc in scenarios.items():
+        sizes = {c.target: 1 for c in sc.couplings}
+        t0 = time.perf_counter()
+        order = derive_order(list(sc.subsims), sc.couplings, sizes)
+        order_info[n] = (feedback_weight(order, sc.couplings, sizes), time.perf_counter() - t0)
+    marginal: dict[int, list[float]] = {n: [] for n in a.sizes}
+    stages: dict[int, float] = {}
     with tempfile.TemporaryDirectory() as tmp:
-        for n in a.sizes:
-            sc = chain_scenario(n, a.method, a.stop)
-            names = list(sc.subsims)
-            sizes = {c.target: 1 for c in sc.couplings}
-            t0 = time.perf_counter()
-            order = derive_order(names, sc.couplings, sizes)
-            derive_s = time.perf_counter() - t0
-            fb = feedback_weight(order, sc.couplings, sizes)
-            short = timed_run(sc, a.method, a.stop / 10, Path(tmp) / f"s{n}.csv")
-            full = timed_run(sc, a.method, a.stop, Path(tmp) / f"f{n}.csv")
-            per_interval = (full[0] - short[0]) / (full[1] - short[1])
-            rows.append((n, fb, derive_s, full[2] / full[1], per_interval))
-    print(f"chain of N masses, {a.method} over Zenoh, H = 0.05 s, 5 samples, cubic, to t = {a.stop:g} s")
-    print("|  N | feedback signals | order derived in | stages/interval | marginal ms/interval |")
-    print("|---:|-----------------:|-----------------:|----------------:|--------------------:|")
-    for n, fb, d, st, pi in rows:
-        print(f"| {n:2d} | {fb:16d} | {d * 1e3:13.1f} ms | {st:15.2f} | {pi * 1e3:19.2f} |")
-    first, last = rows[0], rows[-1]
-    print(f"\nN {first[0]} -> {last[0]}: marginal cost per interval grows {last[4] / first[4]:.2f}x "
-          f"(N grew {last[0] / first[0]:.1f}x; target <= 4.6x from 4 to 16), "
-          f"stages/interval {first[3]:.2f} -> {last[3]:.2f}")
+        for rep in range(a.repeats):
+            for n, sc in scenarios.items():
+                short = timed_run(sc, a.method, a.stop / 10, Path(tmp) / f"s{n}.csv")
+                full = timed_run(sc, a.method, a.stop, Path(tmp) / f"f{n}.csv")
+                marginal[n].append((full[0] - short[0]) / (full[1] - short[1]))
+                stages[n] = full[2] / full[1]
+                print(f"  repeat {rep + 1}: N = {n:2d}: {marginal[n][-1] * 1e3:.2f} ms per interval", flush=True)
+    print(f"chain of N masses, {a.method} over Zenoh, H = 0.05 s, 5 samples, cubic, to t = {a.stop:g} s, "
+          f"{a.repeats} interleaved repeats")
+    print("|  N | feedback signals | order derived in | stages/interval | marginal ms/interval, median (range) |")
+    print("|---:|-----------------:|-----------------:|----------------:|-------------------------------------:|")
+    for n in a.sizes:
+        fb, d = order_info[n]
+        m = marginal[n]
+        print(f"| {n:2d} | {fb:16d} | {d * 1e3:13.1f} ms | {stages[n]:15.2f} | "
+              f"{statistics.median(m) * 1e3:14.2f} ({min(m) * 1e3:.2f}-{max(m) * 1e3:.2f}) |")
+    first, last = a.sizes[0], a.sizes[-1]
+    growth = [b / f for f, b in zip(marginal[first], marginal[last])]
+    print(f"\nN {first} -> {last}: marginal cost per interval grows {statistics.median(growth):.2f}x "
+          f"(per repeat {', '.join(f'{g:.2f}' for g in growth)}; N grew {last / first:.1f}x; target <= 4.6x from 4 "
+          f"to 16), stages/interval {stages[first]:.2f} -> {stages[last]:.2f}")
 
 
 if __name__ == "__main__":
