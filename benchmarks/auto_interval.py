@@ -2,6 +2,7 @@
 
     python benchmarks/auto_interval.py                         # cases 1 and 2, 2,000 s, 3 repeats; case 3 to 20,000 s
     python benchmarks/auto_interval.py --cases 1 --repeats 1 --case3-stop 0
+    python benchmarks/auto_interval.py --paper --case3-stop 0   # also the paper's settings (the bars 4x and 6x)
 
 For cases 1 and 2 (``--cases``):
 
@@ -12,7 +13,10 @@ For cases 1 and 2 (``--cases``):
   read there through a cubic spline of its 0.025 s samples (the unlimited angles, then limited);
 * speed: the marginal wall time ``T(--stop) - T(--short)`` of whole runs (process start, bus, configure
   and the first ``--short`` seconds cancel), RK-U 0.1 s and RF-D and RF-C interleaved, ``--repeats`` times
-  in one run; the ratios RF/RK-U are taken per repeat and printed as median (min-max);
+  in one run; the ratios RF/RK-U are taken per repeat and printed as median (min-max); start-up is
+  ``T(--short)`` less the marginal cost of its first ``--short`` seconds. With ``--paper`` the paper's
+  settings (``caseN.toml``: 0.4 s, 5 samples, zero first guess, linear) run too, RF-D and RF-C, against
+  the bars 4x and 6x;
 * the intervals and round trips (Run actions: the requests an interval waits for one after the other,
   the subsims of an RF-C stage answering concurrently) per simulated second, the stages-per-interval
   histogram, rejected tries, and the interval lengths' range (from the ``.diag.csv``).
@@ -51,8 +55,9 @@ from cosim.scenario import Scenario, load, parse  # noqa: E402
 from cosim.unified import run_unified  # noqa: E402
 from subsims.satellite.transforms import limit_angles  # noqa: E402
 
-SHORT = {"unified": "RK-U 0.1 s", "distributed": "RF-D auto", "centralized": "RF-C auto"}
-BARS = {"distributed": 2.0, "centralized": 3.0}
+SHORT = {"unified": "RK-U 0.1 s", "distributed": "RF-D auto", "centralized": "RF-C auto",
+         "paper-distributed": "RF-D 0.4 s", "paper-centralized": "RF-C 0.4 s"}
+BARS = {"distributed": 2.0, "centralized": 3.0, "paper-distributed": 4.0, "paper-centralized": 6.0}
 
 
 def scenario(case: int, auto: bool) -> Scenario:
@@ -71,9 +76,10 @@ def run(case: int, method: str, stop: float, output: Path, inprocess: bool = Fal
     started = time.perf_counter()
     if method == "unified":
         report = run_unified(scenario(case, auto=False), stop=stop, output=output)
-    else:
-        report = run_scenario(scenario(case, auto=True), method=method, stop=stop, output=output,
-                              inprocess=inprocess, progress=False, log=lambda m: None)
+    else:  # "paper-<method>": caseN.toml (0.4 s, 5 samples, zero first guess, linear) instead of caseN-auto.toml
+        paper = method.startswith("paper-")
+        report = run_scenario(scenario(case, auto=not paper), method=method.removeprefix("paper-"), stop=stop,
+                              output=output, inprocess=inprocess, progress=False, log=lambda m: None)
     return time.perf_counter() - started, report
 
 
@@ -107,7 +113,7 @@ def spread(values: list[float]) -> str:
     return f"{statistics.median(values):.2f} ({min(values):.2f}-{max(values):.2f})"
 
 
-def cases_1_2(cases: list[int], stop: float, short: float, repeats: int, out: Path) -> None:
+def cases_1_2(cases: list[int], stop: float, short: float, repeats: int, out: Path, paper: bool = False) -> None:
     references = {}
     for case in cases:
         started = time.perf_counter()
@@ -117,8 +123,9 @@ def cases_1_2(cases: list[int], stop: float, short: float, repeats: int, out: Pa
         print(f"case {case}: RK-U 0.025 s reference to {stop:g} s in {time.perf_counter() - started:.1f} s",
               flush=True)
 
-    methods = ("unified", "distributed", "centralized")
+    methods = ("unified", "distributed", "centralized") + (("paper-distributed", "paper-centralized") if paper else ())
     marginal: dict[tuple[int, str], list[float]] = {}
+    startup: dict[tuple[int, str], list[float]] = {}  # T(short) less the marginal cost of its first `short` s
     reports: dict[tuple[int, str], object] = {}
     for rep in range(repeats):
         for case in cases:
@@ -126,23 +133,26 @@ def cases_1_2(cases: list[int], stop: float, short: float, repeats: int, out: Pa
                 t_short, _ = run(case, method, short, out / f"case{case}-{method}-short.csv")
                 t_long, report = run(case, method, stop, out / f"case{case}-{method}.csv")
                 marginal.setdefault((case, method), []).append(t_long - t_short)
+                startup.setdefault((case, method), []).append(t_short - (t_long - t_short) * short / (stop - short))
                 reports[(case, method)] = report
                 print(f"  repeat {rep + 1}: case {case} {SHORT[method]:10s} T({stop:g}) {t_long:6.1f} s  "
                       f"T({short:g}) {t_short:5.1f} s  marginal {t_long - t_short:6.1f} s", flush=True)
 
     for case in cases:
         print(f"\n=== case {case}: 0-{stop:g} s, against RK-U at 0.025 s ===")
-        print(f"  {'run':11s} {'Euler angles, deg':>18s} {'position, m':>12s}  marginal wall  ratio to RK-U 0.1 s")
+        print(f"  {'run':11s} {'Euler angles, deg':>18s} {'position, m':>12s}  start-up  marginal wall  "
+              "ratio to RK-U 0.1 s")
         for method in methods:
             report = reports[(case, method)]
             _, da, dr = deviation(report.output, references[case])
             times = marginal[(case, method)]
-            line = f"  {SHORT[method]:11s} {da.max():18.3e} {dr.max():12.3e}  {statistics.median(times):8.1f} s"
+            line = (f"  {SHORT[method]:11s} {da.max():18.3e} {dr.max():12.3e}  "
+                    f"{statistics.median(startup[(case, method)]):6.2f} s  {statistics.median(times):8.1f} s")
             if method != "unified":
                 ratios = [a / b for a, b in zip(times, marginal[(case, "unified")])]
                 line += f"     {spread(ratios)}  (bar {BARS[method]:g}x)"
             print(line)
-        for method in ("distributed", "centralized"):
+        for method in methods[1:]:
             s = reports[(case, method)].summary
             span = s.t_end - s.t_start
             lengths = diag_lengths(reports[(case, method)].diagnostics)
@@ -181,10 +191,12 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--case3-stop", type=float, default=20000.0, help="0: skip case 3")
     ap.add_argument("--out", type=Path, default=ROOT / "results" / "auto")
+    ap.add_argument("--paper", action="store_true",
+                    help="also the paper's settings (caseN.toml RF-D and RF-C, bars 4x and 6x), interleaved")
     args = ap.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     if args.cases:
-        cases_1_2(args.cases, args.stop, args.short, args.repeats, args.out)
+        cases_1_2(args.cases, args.stop, args.short, args.repeats, args.out, args.paper)
     if args.case3_stop > 0:
         case_3(args.case3_stop, args.out)
 
