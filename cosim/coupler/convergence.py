@@ -10,7 +10,7 @@ A scalar signal has converged when, over the interval's samples,
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -34,8 +34,8 @@ class Check:
 
     residuals: dict[str, np.ndarray]
     passed: dict[str, np.ndarray]
-    converged: bool = True  # every channel of every signal passed
-    largest_each: dict[str, float] = field(default_factory=dict)  # per signal, its largest residual (0 if empty)
+    converged: bool  # every channel of every signal passed
+    largest_each: dict[str, float]  # per signal, its largest residual (0 if it has no channel)
 
     @property
     def failing(self) -> list[str]:
@@ -66,7 +66,7 @@ def check(
     few per signal)."""
     names = list(new)
     if not names:
-        return Check({}, {})
+        return Check({}, {}, True, {})
     widths = [new[k].shape[1] for k in names]
     a = np.concatenate([new[k] for k in names], axis=1)
     b = np.concatenate([old[k] for k in names], axis=1)
