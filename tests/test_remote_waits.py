@@ -6,10 +6,12 @@ import time
 
 import numpy as np
 import pytest
+import zenoh
 
-from cosim.contract import SubsimError
+from cosim.contract import SubsimDied, SubsimError
 from cosim.handles import InProcessHandle
 from cosim.launch import Bus
+from cosim.protocol.transport.client import RemoteHandle, _Pending
 from subsims.integrator.subsim import Integrator
 
 TIMES = np.linspace(0.0, 0.4, 5)
@@ -48,3 +50,19 @@ def test_a_request_longer_than_the_timeout_fails_with_timeout(cosim_bus: Bus, ch
         proc.handle.run_interval(TIMES, INPUTS)
     assert err.value.code == "timeout" and err.value.subsim == f"sleepy-{int(changed)}"
     assert time.monotonic() - start < 2.5  # the timeout fired; the computation (3 s) had not finished
+
+
+def test_a_query_that_zenoh_ends_empty_after_its_timeout_is_a_timeout(cosim_bus: Bus) -> None:
+    """Under load zenoh's own timeout can end a query with no reply at all, not even its timeout error: with the
+    process alive that is a timeout, not a missing process; the same empty ending before the timeout is not."""
+    handle = RemoteHandle(cosim_bus.session, cosim_bus.run, "quiet", timeout=0.5)
+    try:
+        handle._alive.set()  # as if its liveliness token had been seen
+        ended = _Pending(iter(()), zenoh.CancellationToken(), None, time.monotonic() - 0.01)
+        err = handle._no_reply("status", ended, None, 0)
+        assert type(err) is SubsimError and err.code == "timeout" and "0.5 s" in err.message
+        early = _Pending(iter(()), zenoh.CancellationToken(), None, time.monotonic() + 60.0)
+        err = handle._no_reply("status", early, None, 0)
+        assert isinstance(err, SubsimDied) and err.code == "no_responder"
+    finally:
+        handle.close()
