@@ -89,7 +89,6 @@ class RemoteHandle(SubsimHandle):
         self, session: zenoh.Session, run: str, name: str, timeout: float = 60.0, key: bytes | None = None
     ) -> None:
         self.session, self.run, self.name = session, run, check_name(name, "subsim name")
-        self._secret = key
         self._sealer = None if key is None else sealer(key)
         self._key = rpc_key(run, name)
         self.timeout = timeout
