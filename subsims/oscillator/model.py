@@ -2,25 +2,26 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
 from subsims.numerics import as_table, rk4
 
 
-def derivative(x: np.ndarray, force: float, m: float, k: float) -> np.ndarray:
+def derivative(x: Sequence[float], force: float, m: float, k: float) -> tuple[float, float]:
+    """(u', v') = (v, (F - k u) / m), on Python floats: a numpy array per RK stage would cost more than the sum."""
     u, v = x
-    return np.array([v, (force - k * u) / m])
+    return v, (force - k * u) / m
 
 
 def integrate(
     x0: np.ndarray, times: np.ndarray, force: Callable[[np.ndarray], np.ndarray], m: float, k: float, idiv: int
 ) -> np.ndarray:
     """States (n, 2) = (u, v) at every sample time; ``force(ts)``: F at all the RK times (k,) in one call."""
-    states, _, _ = rk4(lambda t, x, f: derivative(x, f, m, k), np.asarray(x0, dtype=np.float64), times, idiv,
+    states, _, _ = rk4(lambda t, x, f: derivative(x, f, m, k), [float(v) for v in x0], times, idiv,
                        lambda ts: as_table(force(ts), ts.size, 1, "F")[:, 0].tolist())
-    return np.array(states)
+    return np.array(states, dtype=np.float64)
 
 
 def energy(u1: np.ndarray, v1: np.ndarray, u2: np.ndarray, v2: np.ndarray, m=1.0, k1=4 * np.pi**2,
