@@ -35,7 +35,7 @@ import numpy as np
 import zenoh
 
 from cosim.handles import InProcessHandle
-from cosim.launch import Bus
+from cosim.launch import Bus, terminate
 from cosim.protocol.keys import coordinator_alive_key
 from cosim.protocol.messages import decode_reply, decode_request, encode_request, encode_result
 from cosim.protocol.security import ClientSecurity
@@ -182,12 +182,7 @@ class BareClient:
                 self._answers(STOP)
             self.popen.wait(3.0)
         except Exception:
-            self.popen.terminate()
-            try:
-                self.popen.wait(3.0)
-            except subprocess.TimeoutExpired:
-                self.popen.kill()
-                self.popen.wait()
+            terminate(self.popen)
 
 
 # --- measurement ---------------------------------------------------------------------------------------

@@ -171,13 +171,9 @@ class RelayProcess:
             raise
 
     def stop(self) -> None:
-        if self.popen.poll() is None:
-            self.popen.terminate()
-            try:
-                self.popen.wait(3.0)
-            except subprocess.TimeoutExpired:
-                self.popen.kill()
-                self.popen.wait()
+        from cosim.launch import terminate  # the relay process itself imports nothing of cosim
+
+        terminate(self.popen)
         if self.popen.stdout is not None:
             self.popen.stdout.close()
 

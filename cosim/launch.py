@@ -53,6 +53,17 @@ def subsim_command(
     return [*head, "--connect", endpoint, "--run", run, "--name", name, *tls, *lease_arg]
 
 
+def terminate(popen: subprocess.Popen, grace: float = 3.0) -> int:
+    """SIGTERM, then SIGKILL if the process is still there after ``grace`` seconds; always reaps it. Its exit code."""
+    if popen.poll() is None:
+        popen.terminate()
+    try:
+        return popen.wait(grace)
+    except subprocess.TimeoutExpired:
+        popen.kill()
+        return popen.wait()
+
+
 @dataclass
 class SubsimProcess:
     """A local subsim process and its handle."""
@@ -75,12 +86,7 @@ class SubsimProcess:
         try:
             return self.popen.wait(grace)
         except subprocess.TimeoutExpired:
-            self.popen.terminate()
-        try:
-            return self.popen.wait(grace)
-        except subprocess.TimeoutExpired:
-            self.popen.kill()
-            return self.popen.wait()
+            return terminate(self.popen, grace)
         finally:
             self.handle.close()
 

@@ -28,6 +28,7 @@ from pathlib import Path
 import pytest
 from certs import make_certs
 
+from cosim.launch import terminate
 from cosim.runner import run_scenario
 from cosim.scenario import load
 
@@ -91,13 +92,7 @@ def hosts() -> Iterator[Hosts]:
 
 
 def _stop(popen: subprocess.Popen) -> None:
-    if popen.poll() is None:
-        popen.terminate()
-        try:
-            popen.wait(10)
-        except subprocess.TimeoutExpired:
-            popen.kill()
-            popen.wait()
+    terminate(popen, 10.0)
 
 
 def _external_command(stderr_line: str) -> tuple[dict[str, str], list[str]]:
