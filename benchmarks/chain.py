@@ -41,12 +41,12 @@ def chain_scenario(n: int, method: str, stop: float) -> Scenario:
     return parse(raw, Path(f"chain{n}.toml"))
 
 
-def timed_run(scenario: Scenario, method: str, stop: float, out: Path) -> tuple[float, int, int]:
+def timed_run(scenario: Scenario, method: str, stop: float, out: Path) -> tuple[float, int, int, int]:
     started = time.perf_counter()
     report = run_scenario(scenario, method=method, stop=stop, output=out, progress=False, log=lambda _m: None)
     wall = time.perf_counter() - started
     s = report.summary
-    return wall, s.intervals, sum(k * v for k, v in s.stages.items())
+    return wall, s.intervals, sum(k * v for k, v in s.stages.items()), s.round_trips
 
 
 def main() -> None:
@@ -65,6 +65,7 @@ def main() -> None:
         order_info[n] = (feedback_weight(order, sc.couplings, sizes), time.perf_counter() - t0)
     marginal: dict[int, list[float]] = {n: [] for n in a.sizes}
     stages: dict[int, float] = {}
+    trips: dict[int, float] = {}  # sequential round trips (Run actions) per interval
     with tempfile.TemporaryDirectory() as tmp:
         for rep in range(a.repeats):
             for n, sc in scenarios.items():
@@ -72,15 +73,18 @@ def main() -> None:
                 full = timed_run(sc, a.method, a.stop, Path(tmp) / f"f{n}.csv")
                 marginal[n].append((full[0] - short[0]) / (full[1] - short[1]))
                 stages[n] = full[2] / full[1]
+                trips[n] = full[3] / full[1]
                 print(f"  repeat {rep + 1}: N = {n:2d}: {marginal[n][-1] * 1e3:.2f} ms per interval", flush=True)
     print(f"chain of N masses, {a.method} over Zenoh, H = 0.05 s, 5 samples, cubic, to t = {a.stop:g} s, "
           f"{a.repeats} interleaved repeats")
-    print("|  N | feedback signals | order derived in | stages/interval | marginal ms/interval, median (range) |")
-    print("|---:|-----------------:|-----------------:|----------------:|-------------------------------------:|")
+    print("|  N | feedback signals | order derived in | stages/interval | round trips/interval "
+          "| marginal ms/interval, median (range) |")
+    print("|---:|-----------------:|-----------------:|----------------:|---------------------:"
+          "|-------------------------------------:|")
     for n in a.sizes:
         fb, d = order_info[n]
         m = marginal[n]
-        print(f"| {n:2d} | {fb:16d} | {d * 1e3:13.1f} ms | {stages[n]:15.2f} | "
+        print(f"| {n:2d} | {fb:16d} | {d * 1e3:13.1f} ms | {stages[n]:15.2f} | {trips[n]:20.2f} | "
               f"{statistics.median(m) * 1e3:14.2f} ({min(m) * 1e3:.2f}-{max(m) * 1e3:.2f}) |")
     first, last = a.sizes[0], a.sizes[-1]
     growth = [b / f for f, b in zip(marginal[first], marginal[last])]

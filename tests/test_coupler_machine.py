@@ -110,3 +110,65 @@ def test_a_run_commits_whole_intervals_on_the_grid_and_ends_with_done() -> None:
     # ends on the grid start + k H (no accumulated sum of H), until past the stop time
     assert commits == [(0.0 + k * 0.3, 0.0 + (k + 1) * 0.3) for k in range(4)]
     assert action.summary.intervals == 4 and action.summary.t_end == commits[-1][1]
+
+
+def chain(n: int) -> Plan:
+    """n masses in a line, each driven by its neighbours' outputs: m_i.u = -(y_{i-1} + y_{i+1}) / 2."""
+    couplings = []
+    for i in range(n):
+        near = [f"m{j}.y" for j in (i - 1, i + 1) if 0 <= j < n]
+        couplings.append(Coupling.make(f"m{i}.u", near, "linear", {"gains": [-0.5] * len(near)}))
+    ports_in = {f"m{i}": {"u": 1} for i in range(n)}
+    ports_out = {f"m{i}": {"y": 1} for i in range(n)}
+    return Plan.build(ports_in, ports_out, couplings, "distributed")
+
+
+def one_at_a_time(plan: Plan) -> Plan:
+    """The same plan with every subsim a level of its own: plain Gauss-Seidel, one Run per subsim."""
+    sequential = Plan(plan.names, plan.inputs, plan.outputs, plan.couplings, plan.order, plan.feedback, plan.forward)
+    sequential.__dict__["levels"] = tuple((name,) for name in plan.order)
+    return sequential
+
+
+def drive(plan: Plan, t_stop: float) -> tuple[list[list[str]], list[dict]]:
+    """Every Run's subsims and every committed interval's outputs; each mass starts at y0 = i + 1."""
+    steps = Relaxation(plan, settings("distributed", interval=0.3)).run(0.0, t_stop)
+    action, runs, commits = steps.send(None), [], []
+    while not isinstance(action, Done):
+        if isinstance(action, Run):
+            runs.append(list(action.inputs))
+            reply = {name: {"y": integrate_exactly(int(name[1:]) + 1.0, action.times, ins["u"][:, 0])[:, None]}
+                     for name, ins in action.inputs.items()}
+            action = steps.send(reply)
+        else:
+            if isinstance(action, Commit):
+                commits.append(action.interval.outputs)
+            action = steps.send(None)
+    return runs, commits
+
+
+def test_the_levels_of_an_order_group_subsims_that_read_nothing_of_each_other() -> None:
+    plan = chain(6)
+    assert sorted(name for level in plan.levels for name in level) == sorted(plan.order)
+    assert len(plan.levels) == 2  # the derived order alternates: every mass reads only the other colour
+    for level in plan.levels:
+        for name in level:
+            reads = {s.subsim for c in plan.forward_into[name] for s in c.sources}
+            assert not reads & set(level)
+    # a line a -> b -> c read forward stays three levels of one
+    line = [Coupling.make("b.u", "a.y"), Coupling.make("c.u", "b.y"), Coupling.make("a.u", "c.y")]
+    ports_in, ports_out = {n: {"u": 1} for n in "abc"}, {n: {"y": 1} for n in "abc"}
+    plan = Plan.build(ports_in, ports_out, line, "distributed", order=["a", "b", "c"])
+    assert plan.levels == (("a",), ("b",), ("c",))
+
+
+def test_a_level_runs_in_one_action_with_the_same_bits_as_one_subsim_at_a_time() -> None:
+    plan = chain(6)
+    runs, commits = drive(plan, 0.9)
+    seq_runs, seq_commits = drive(one_at_a_time(plan), 0.9)
+    assert all(len(r) == 3 for r in runs) and all(len(r) == 1 for r in seq_runs)
+    assert len(seq_runs) == 3 * len(runs)  # the same stages: 2 round trips each instead of 6
+    assert len(commits) == len(seq_commits) == 3
+    for batched, sequential in zip(commits, seq_commits):
+        for name in plan.order:
+            assert batched[name]["y"].tobytes() == sequential[name]["y"].tobytes()

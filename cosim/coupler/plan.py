@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 
 from cosim.coupler.couplings import Coupling, Ports, SignalRef, check_couplings
 from cosim.coupler.order import check_order, derive_order, feedback_weight, is_feedback
@@ -27,6 +28,23 @@ class Plan:
     @property
     def sizes(self) -> dict[SignalRef, int]:
         return {SignalRef(s, p): w for s, ports in self.inputs.items() for p, w in ports.items()}
+
+    @cached_property
+    def forward_into(self) -> dict[str, tuple[Coupling, ...]]:
+        """Per subsim, the forward couplings that drive its inputs (from subsims before it in ``order``)."""
+        return {name: tuple(c for c in self.forward if c.target.subsim == name) for name in self.order}
+
+    @cached_property
+    def levels(self) -> tuple[tuple[str, ...], ...]:
+        """``order`` grouped into levels: a subsim's level is one past the highest level of the subsims its
+        forward couplings read (0 when it reads none). The subsims of a level read nothing of each other in
+        the current stage, so they can run concurrently and still see exactly what they see run one after
+        the other in ``order`` (multicolour Gauss-Seidel: an alternating chain is two levels, not N)."""
+        level: dict[str, int] = {}
+        for name in self.order:
+            reads = {s.subsim for c in self.forward_into[name] for s in c.sources}
+            level[name] = 1 + max((level[r] for r in reads), default=-1)
+        return tuple(tuple(n for n in self.order if level[n] == k) for k in range(max(level.values(), default=-1) + 1))
 
     @property
     def feedback_signals(self) -> int:
