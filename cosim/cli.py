@@ -141,6 +141,10 @@ def _describe(args: argparse.Namespace) -> int:
                 plan = session.plans[method]
                 given = "given" if st.order is not None else "derived"
                 print(f"  order ({given}): {' -> '.join(plan.order)}")
+                if len(plan.levels) < len(plan.order):  # some subsims run side by side
+                    groups = " -> ".join("{" + ", ".join(level) + "}" if len(level) > 1 else level[0]
+                                         for level in plan.levels)
+                    print(f"  run as {len(plan.levels)} concurrent groups per stage: {groups}")
                 print(f"  feedback edges ({plan.feedback_signals} scalar signals): "
                       f"{'; '.join(map(str, plan.feedback)) or 'none'}")
     finally:

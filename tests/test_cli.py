@@ -164,6 +164,23 @@ def test_describe_prints_order_and_feedback_edges() -> None:
     assert "order (derived): mass1 -> mass2" in done.stdout
     assert "feedback edges (1 scalar signals): mass2.u -> mass1.F" in done.stdout
     assert "mass1.u -> mass2.F via gain" in done.stdout
+    assert "concurrent groups" not in done.stdout  # mass2 reads mass1 in the same stage
+
+
+def test_describe_prints_the_groups_of_subsims_that_run_side_by_side(tmp_path: Path) -> None:
+    lines = ['name = "line4"', "stop = 1.0", "[coupling]", 'method = "distributed"', "interval = 0.1"]
+    for i in range(4):
+        lines += [f"[subsims.m{i}]", 'model = "subsims.oscillator.subsim:Mass"', "params = { m = 1.0, k = 4.0 }"]
+    for i in range(4):
+        near = ", ".join(f'"m{j}.u"' for j in (i - 1, i + 1) if 0 <= j < 4)
+        lines += ["[[couplings]]", f'to = "m{i}.F"', f"from = [{near}]", 'transform = "linear"',
+                  f"params = {{ gains = [{', '.join(['1.0'] * (2 if 0 < i < 3 else 1))}] }}"]
+    sc = tmp_path / "line4.toml"
+    sc.write_text("\n".join(lines) + "\n")
+    done = subprocess.run([*COSIM, "describe", str(sc)], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert "order (derived): m0 -> m2 -> m1 -> m3" in done.stdout
+    assert "run as 2 concurrent groups per stage: {m0, m2} -> {m1, m3}" in done.stdout
 
 
 @pytest.mark.zenoh
