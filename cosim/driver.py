@@ -155,6 +155,9 @@ class Coordinator:
         self._machine: Relaxation | None = None
         # converged subsims whose commit has not been sent: it rides on their next run_interval
         self._uncommitted: set[str] = set()
+        # committed intervals not yet handed to on_interval: recorded while the next run is in flight
+        self._unrecorded: list[Interval] = []
+        self._on_interval: Callable[[Interval], None] | None = None
 
     @property
     def order(self) -> list[str]:
@@ -213,6 +216,23 @@ class Coordinator:
     # --- performing the machine's actions -------------------------------------------------------
 
     def _drive(self, steps: Steps, on_interval: Callable[[Interval], None] | None) -> RunSummary | None:
+        """Perform the machine's actions. A committed interval is handed to ``on_interval`` (written, shown)
+        once the next run's requests are out, so that writing it overlaps the subsims' work instead of
+        delaying it; whatever is left is handed over before this returns or raises."""
+        self._on_interval = on_interval
+        try:
+            return self._perform(steps)
+        finally:
+            self._record()
+
+    def _record(self) -> None:
+        """Hand every committed interval not yet recorded to ``on_interval``, in order."""
+        while self._unrecorded:
+            interval = self._unrecorded.pop(0)
+            if self._on_interval is not None:
+                self._on_interval(interval)
+
+    def _perform(self, steps: Steps) -> RunSummary | None:
         started = time.perf_counter()
         restarts_before = len(self.restarts)
         reply: Outputs | None = None
@@ -239,8 +259,7 @@ class Coordinator:
                 action.interval.wall_time = time.perf_counter() - started
                 action.interval.restarts, restarts_before = len(self.restarts) - restarts_before, len(self.restarts)
                 self._journal_commit(action.interval)
-                if on_interval is not None:
-                    on_interval(action.interval)
+                self._unrecorded.append(action.interval)
                 started = time.perf_counter()
             elif isinstance(action, Done):
                 return action.summary
@@ -261,11 +280,20 @@ class Coordinator:
                 pending[name] = handle.start_run_interval(action.times, inputs, interp, commit=name in uncommitted)
             except SubsimError as exc:  # it was known to be gone before sending
                 pending[name] = _raiser(exc)
+        recording: BaseException | None = None
+        try:
+            self._record()  # the last committed interval, while this run's requests are being served
+        except BaseException as exc:  # raised once every request has answered: none is left in flight
+            recording = exc
         try:
             results = self._gather(pending, replace=True)
         except _Replaced as replaced:  # who answered has committed what rode on the request
             uncommitted.difference_update(replaced.answered)
+            if recording is not None:
+                raise recording from None
             raise
+        if recording is not None:
+            raise recording
         self.deadline.observe(time.perf_counter() - sent)
         uncommitted.difference_update(results)
         return {name: r.outputs for name, r in results.items()}

@@ -231,3 +231,42 @@ def test_run_sends_each_commit_with_the_next_interval_and_commits_all_at_the_end
         t = float(c2.advance(t, (k + 1) * 0.1).t[-1])
     assert a2.get_state().state.tobytes() == a.get_state().state.tobytes()
     assert b2.get_state().state.tobytes() == b.get_state().state.tobytes()
+
+
+class LoggedHandle(InProcessHandle):
+    """An in-process integrator that logs when each run_interval is sent (a failing one from ``fail_at`` on)."""
+
+    def __init__(self, name: str, log: list, fail_at: float = math.inf) -> None:
+        super().__init__(Integrator(), name)
+        self.log, self.fail_at = log, fail_at
+
+    def start_run_interval(self, times, inputs, interp="linear", commit=False):  # noqa: ANN001, ANN201
+        self.log.append(("sent", self.name, float(times[0])))
+        if times[0] >= self.fail_at:
+            raise RuntimeError(f"{self.name} fails at t = {times[0]}")
+        return super().start_run_interval(times, inputs, interp, commit)
+
+
+def test_a_committed_interval_is_recorded_once_the_next_run_is_sent_and_none_is_lost_on_failure() -> None:
+    log: list = []
+    handles = {n: LoggedHandle(n, log) for n in ("a", "b")}
+    for h in handles.values():
+        h.configure({"y0": [1.0]})
+    couplings = [Coupling.make("a.u", "b.y", "gain", {"k": -1.0}), Coupling.make("b.u", "a.y")]
+    settings = Settings(method="centralized", interval=0.1, samples=3)
+    c = Coordinator(handles, couplings, settings)
+    c.run(0.0, 0.3, on_interval=lambda iv: log.append(("recorded", float(iv.t[0]))))
+    recorded = [i for i, e in enumerate(log) if e[0] == "recorded"]
+    assert [log[i][1] for i in recorded] == pytest.approx([0.0, 0.1, 0.2])  # each once, in order
+    for i in recorded[:-1]:  # the next interval's first requests are already out (overlapping the writing)
+        assert log[i - 1][0] == "sent" and log[i - 1][2] == pytest.approx(log[i][1] + 0.1)
+    assert recorded[-1] == len(log) - 1  # the last one when the run ends
+    # a run that fails in its third interval has still recorded the two it committed
+    log.clear()
+    handles = {n: LoggedHandle(n, log, fail_at=0.2 - 1e-9 if n == "b" else math.inf) for n in ("a", "b")}
+    for h in handles.values():
+        h.configure({"y0": [1.0]})
+    with pytest.raises(RuntimeError, match="b fails"):
+        Coordinator(handles, couplings, settings).run(0.0, 0.3, on_interval=lambda iv: log.append(
+            ("recorded", float(iv.t[0]))))
+    assert [e[1] for e in log if e[0] == "recorded"] == pytest.approx([0.0, 0.1])
