@@ -30,8 +30,8 @@ Measured 2026-11-24 on the project's 2-core machine, ``--paper`` (3 repeats), 65
 order attitude -> orbit -> aero (attitude and orbit side by side): case 1: angles RK-U 0.1 s 5.8e-11 deg, RF-D auto
 1.1e-11, RF-C auto 1.1e-11; position 1.52e-6 m, 7.3e-7, 1.33e-6; case 2: angles 5.5e-11, 1.2e-11, 1.2e-11; position
 7.4e-7, 2.1e-7, 7.8e-7 (position deviations are rounding: RK-U at 0.05 s deviates as much as at 0.1 s). Marginal
-wall ratios to RK-U 0.1 s, median (range): case 1 RF-D auto 2.82 (2.73-2.87), RF-C auto 3.54 (3.36-3.75); case 2
-2.65 (2.58-2.67) and 3.19 (3.16-3.19); the paper's settings: RF-D 22.65 and 22.39, RF-C 20.90 and 20.95. About 0.26
+wall ratios to RK-U 0.1 s, median (range): case 1 RF-D auto 2.52 (2.46-2.64), RF-C auto 3.16 (3.09-3.16); case 2
+2.35 (2.31-2.35) and 2.94 (2.91-3.01); the paper's settings: RF-D 21.70 and 21.15, RF-C 20.48 and 20.51. About 0.26
 intervals/s (median 4.5 s), 1.10 (RF-D) and 0.81 (RF-C) round trips/s. Case 3: both within 1.0e-5 deg of RK-U
 0.1 s to 20,000 s.
 """
