@@ -11,6 +11,7 @@ import uuid
 from pathlib import Path
 
 import pytest
+from terminal import as_from_a_terminal
 
 from cosim.results import read_results
 
@@ -102,7 +103,8 @@ def test_ctrl_c_keeps_committed_results_and_cleans_up(tmp_path: Path, procs: lis
     out = tmp_path / "long.csv"
     tag, env = tagged()
     proc = subprocess.Popen([*COSIM, "run", str(OSCILLATOR), "--stop", "1000", "--output", str(out)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+                            preexec_fn=as_from_a_terminal)
     procs.append(proc)
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline and (not out.exists() or len(out.read_text().splitlines()) < 50):

@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from terminal import as_from_a_terminal
 
 from cosim import __version__
 from cosim.outputs import AppendFile, OutputWriteError, atomic_write, stream_path
@@ -51,7 +52,7 @@ class Run:
 
     def __init__(self, *args: str, preexec_fn: Callable[[], object] | None = None) -> None:
         self.proc = subprocess.Popen([*COSIM, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                                     env=ENV, preexec_fn=preexec_fn)
+                                     env=ENV, preexec_fn=preexec_fn or as_from_a_terminal)
         self.err: list[str] = []
         self.out = ""
         self._reader = threading.Thread(target=self._read, daemon=True)
@@ -167,7 +168,7 @@ def test_signal_stops_subsims_keeps_every_committed_interval_and_says_where(
 def test_under_nohup_a_hangup_does_not_stop_the_run(tmp_path: Path, runs: list[Run]) -> None:
     out = tmp_path / "nohup.csv"
     run = start(runs, "run", str(OSCILLATOR), "--stop", "1000", "--output", str(out), "--inprocess",
-                preexec_fn=lambda: signal.signal(signal.SIGHUP, signal.SIG_IGN))  # as nohup does
+                preexec_fn=lambda: (as_from_a_terminal(), signal.signal(signal.SIGHUP, signal.SIG_IGN)))  # nohup
     diag = out.with_name(out.name + ".diag.csv")
     wait_for_intervals(run, diag, 5)
     run.proc.send_signal(signal.SIGHUP)
