@@ -15,6 +15,7 @@ import time
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import NoReturn
 
 import numpy as np
 
@@ -209,8 +210,13 @@ class Coordinator:
 
     def commit_pending(self) -> None:
         """Commit, in one concurrent round trip, the converged trials still waiting for a next interval."""
-        names = [n for n in self.handles if n in self._uncommitted]
-        self._gather({n: self.handles[n].start_commit() for n in names})
+        pending: dict[str, Callable[[], object]] = {}
+        for name in [n for n in self.handles if n in self._uncommitted]:
+            try:
+                pending[name] = self.handles[name].start_commit()
+            except SubsimError as exc:  # known to be gone before sending: replaced like one that dies waiting
+                pending[name] = _raiser(exc)
+        self._gather(pending)
         self._uncommitted.clear()
 
     # --- performing the machine's actions -------------------------------------------------------
@@ -367,8 +373,8 @@ class _Replaced(Exception):
         self.answered = answered
 
 
-def _raiser(exc: Exception) -> Callable[[], IntervalResult]:
-    def fail() -> IntervalResult:
+def _raiser(exc: Exception) -> Callable[[], NoReturn]:
+    def fail() -> NoReturn:
         raise exc
 
     return fail

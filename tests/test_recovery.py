@@ -89,7 +89,7 @@ def kill(pid: int, sig: int = signal.SIGKILL) -> None:
     os.kill(pid, sig)
 
 
-# (method, victim, moment, which occurrence): 24 kill points
+# (method, victim, moment, which occurrence): 26 kill points
 POINTS = [
     (method, victim, moment, k)
     for method in ("centralized", "distributed")
@@ -99,6 +99,8 @@ POINTS = [
         ("b", "in-flight", 2), ("c", "in-flight", 5), ("a", "in-flight", 7),
         ("a", "stage", 0), ("c", "commit", 2), ("b", "final", 0),
     ]
+] + [  # killed in the last stage of the third interval (a checkpoint's), its death known before the commit is sent
+    ("centralized", "c", "noticed", 23), ("distributed", "c", "noticed", 9),  # stages 10, 7, 7 and 4, 3, 3
 ]
 
 
@@ -114,8 +116,12 @@ def test_a_killed_subsim_is_replaced_and_the_results_are_bit_identical(
         def on_stage(stage: int, outputs: dict) -> None:
             n = seen["stage"]
             seen["stage"] += 1
-            if moment == "stage" and n == k:
+            if moment in ("stage", "noticed") and n == k:
                 kill(ring.pid(victim))
+            if moment == "noticed" and n == k:  # the coordinator learns of it before it sends anything more
+                deadline = time.monotonic() + 10
+                while ring.coordinator.handles[victim].alive and time.monotonic() < deadline:
+                    time.sleep(0.005)
             if moment == "in-flight" and n == k:  # the next request is being computed 10 ms from now
                 threading.Timer(0.01, kill, (ring.pid(victim),)).start()
 
