@@ -15,7 +15,7 @@ import time
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import NoReturn
+from typing import Any, NoReturn, TypeVar
 
 import numpy as np
 
@@ -38,6 +38,8 @@ from cosim.coupler.relaxation import (
     sample_times,
 )
 from cosim.handles import Description, IntervalResult, SubsimHandle, SubsimState
+
+T = TypeVar("T")
 
 OnStage = Callable[[int, Outputs], None]
 Revive = Callable[[str], SubsimHandle]  # a new process for the named subsim, configured at the run's start
@@ -210,13 +212,8 @@ class Coordinator:
 
     def commit_pending(self) -> None:
         """Commit, in one concurrent round trip, the converged trials still waiting for a next interval."""
-        pending: dict[str, Callable[[], object]] = {}
-        for name in [n for n in self.handles if n in self._uncommitted]:
-            try:
-                pending[name] = self.handles[name].start_commit()
-            except SubsimError as exc:  # known to be gone before sending: replaced like one that dies waiting
-                pending[name] = _raiser(exc)
-        self._gather(pending)
+        names = [n for n in self.handles if n in self._uncommitted]
+        self._gather({n: _send(self.handles[n].start_commit) for n in names})
         self._uncommitted.clear()
 
     # --- performing the machine's actions -------------------------------------------------------
@@ -282,10 +279,7 @@ class Coordinator:
             handle = self.handles[name]
             handle.deadline = deadline
             self._sent[name] = inputs
-            try:
-                pending[name] = handle.start_run_interval(action.times, inputs, interp, commit=name in uncommitted)
-            except SubsimError as exc:  # it was known to be gone before sending
-                pending[name] = _raiser(exc)
+            pending[name] = _send(handle.start_run_interval, action.times, inputs, interp, commit=name in uncommitted)
         recording: BaseException | None = None
         try:
             self._record()  # the last committed interval, while this run's requests are being served
@@ -373,8 +367,15 @@ class _Replaced(Exception):
         self.answered = answered
 
 
-def _raiser(exc: Exception) -> Callable[[], NoReturn]:
+def _send(start: Callable[..., Callable[[], T]], *args: Any, **kwargs: Any) -> Callable[[], T]:
+    """``start(...)``, the wait it returns; a subsim known to be gone before sending fails when waited for, as
+    one that dies while its request waits does, so that both are replaced the same way."""
+    try:
+        return start(*args, **kwargs)
+    except SubsimError as exc:
+        error = exc  # the except block unbinds ``exc``
+
     def fail() -> NoReturn:
-        raise exc
+        raise error
 
     return fail
