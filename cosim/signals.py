@@ -12,6 +12,7 @@ import bisect
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -130,6 +131,57 @@ def _vectorized(scalar: Callable[[float], np.ndarray], batch: Callable[[np.ndarr
     return at
 
 
+class _Weights(NamedTuple):
+    """What interpolating at a batch of times ``ts`` (k,) needs of a grid, whatever the sample values: row r is
+    ``(sum_j coef[j, r] values[nodes[j, r]]) / den[r]``, summed in order of j, except the rows ``exact_rows``,
+    which are the samples ``exact_nodes`` themselves."""
+
+    nodes: np.ndarray  # (terms, k): per term j, the sample index of every row
+    coef: np.ndarray  # (terms, k, 1): per term j, its weight
+    den: np.ndarray | None  # (k, 1); None when the weights sum to one by construction (linear)
+    exact_rows: np.ndarray
+    exact_nodes: np.ndarray
+
+
+def _apply(weights: _Weights, values: np.ndarray) -> np.ndarray:
+    terms = weights.coef * values[weights.nodes]  # (terms, k, m), each product as the scalar forms compute it
+    out = terms[0] + terms[1] if len(terms) > 1 else terms[0]  # (a view of the fresh ``terms``: ours to change)
+    for term in terms[2:]:
+        out += term
+    if weights.den is not None:
+        out /= weights.den
+    if weights.exact_rows.size:
+        out[weights.exact_rows] = values[weights.exact_nodes]
+    return out
+
+
+# Every stage of an interval, and every subsim of a stage, interpolates on the same grid at the same times (the
+# integrators' RK times): the weights are computed once per (scheme, grid, times) and kept for the next calls.
+_KEPT_WEIGHTS: dict[bytes, _Weights] = {}
+KEPT_WEIGHTS_MAX = 32  # entries (each a few KB): memory stays flat however long the run
+_NO_ROWS = np.zeros(0, dtype=np.intp)
+
+
+def _weights(scheme: str, times: np.ndarray, ts: np.ndarray, compute: Callable[[np.ndarray, np.ndarray], _Weights]
+             ) -> _Weights:
+    if ts.size < 4:  # one time (the scalar form of a batch): not worth keeping
+        return compute(times, ts)
+    key = b"".join((scheme.encode(), times.size.to_bytes(4, "little"), times.tobytes(), ts.tobytes()))
+    found = _KEPT_WEIGHTS.get(key)
+    if found is None:
+        found = compute(times, ts)
+        if len(_KEPT_WEIGHTS) >= KEPT_WEIGHTS_MAX:
+            _KEPT_WEIGHTS.clear()  # (one call: safe against another thread's insert; old grids are not reused)
+        _KEPT_WEIGHTS[key] = found
+    return found
+
+
+def _linear_weights(times: np.ndarray, ts: np.ndarray) -> _Weights:
+    i = np.searchsorted(times[1:-1], ts, side="right")  # = the scalar's clipped bisect_right(grid, t) - 1
+    w = ((ts - times[i]) / (times[1:] - times[:-1])[i])[:, None]  # exact at both ends of the step
+    return _Weights(np.stack((i, i + 1)), np.stack((1.0 - w, w)), None, _NO_ROWS, _NO_ROWS)
+
+
 def _linear(times: np.ndarray, values: np.ndarray) -> Interpolant:
     grid = times.tolist()
     n = len(grid)
@@ -142,15 +194,7 @@ def _linear(times: np.ndarray, values: np.ndarray) -> Interpolant:
         # exact at both ends of the step (w = 0 or 1), and no overflow of values[i + 1] - values[i]
         return (1.0 - w) * values[i] + w * values[i + 1]
 
-    inner, step = times[1:-1], times[1:] - times[:-1]  # step[i] is the scalar's grid[i + 1] - grid[i]
-    left, right = values[:-1], values[1:]
-
-    def batch(ts: np.ndarray) -> np.ndarray:
-        i = np.searchsorted(inner, ts, side="right")  # = the scalar's clipped bisect_right(grid, t) - 1
-        w = ((ts - times[i]) / step[i])[:, None]
-        return (1.0 - w) * left[i] + w * right[i]
-
-    return _vectorized(at, batch)
+    return _vectorized(at, lambda ts: _apply(_weights("linear", times, ts, _linear_weights), values))
 
 
 def _barycentric_weights(x: np.ndarray) -> np.ndarray:
@@ -185,44 +229,50 @@ def _barycentric(nodes: np.ndarray, vals: np.ndarray) -> Interpolant:
         c = w * (np.abs(d).min() / d)  # scaled: w / d overflows when t is within rounding of a node
         return _barycentric_sum(c, vals)
 
-    def batch(ts: np.ndarray) -> np.ndarray:
-        return _barycentric_batch(ts, x[None, :], w[None, :], vals[None, :, :], np.zeros(ts.size, dtype=np.intp))
+    def compute(times: np.ndarray, ts: np.ndarray) -> _Weights:
+        return _piece_weights(ts, times[None, :], w[None, :], np.zeros(ts.size, dtype=np.intp),
+                              np.arange(times.size)[None, :])
 
-    return _vectorized(at, batch)
+    return _vectorized(at, lambda ts: _apply(_weights("lagrange", x, ts, compute), vals))
 
 
-def _barycentric_batch(ts: np.ndarray, x: np.ndarray, w: np.ndarray, vals: np.ndarray, piece: np.ndarray) -> np.ndarray:
-    """Per time ``ts[r]``, the polynomial of piece ``piece[r]`` (nodes ``x[p]``, weights ``w[p]``, values
-    ``vals[p]``), as ``_barycentric``'s scalar form computes it; a time on a node gives that node's value."""
+def _piece_weights(ts: np.ndarray, x: np.ndarray, w: np.ndarray, piece: np.ndarray, node: np.ndarray) -> _Weights:
+    """Per time ``ts[r]``, the weights of the polynomial of piece ``piece[r]`` (nodes ``x[p]`` = the samples
+    ``node[p]``, barycentric weights ``w[p]``), as ``_barycentric``'s scalar form computes them; a time on a
+    node gives that node's value."""
     xp = x[piece]
     d = ts[:, None] - xp
     hit = d == 0.0
     on_node = hit.any(axis=1)
-    d[hit] = 1.0  # rows with a hit are replaced below; keeps the others free of 0/0
-    c = w[piece] * (np.abs(d).min(axis=1)[:, None] / d)
-    out = _barycentric_sum(c, vals[piece])
-    if on_node.any():
-        r = np.flatnonzero(on_node)
-        out[r] = vals[piece[r], np.argmax(hit[r], axis=1)]
-    return out
+    d[hit] = 1.0  # rows with a hit are replaced; keeps the others free of 0/0
+    c = w[piece] * (np.abs(d).min(axis=1)[:, None] / d)  # scaled: w / d overflows within rounding of a node
+    den = c[:, 0]
+    for j in range(1, c.shape[1]):
+        den = den + c[:, j]
+    rows = np.flatnonzero(on_node)
+    nodes = node[piece]
+    return _Weights(np.ascontiguousarray(nodes.T), np.ascontiguousarray(c.T)[:, :, None], den[:, None], rows,
+                    nodes[rows, np.argmax(hit[rows], axis=1)])
 
 
 def _lagrange(times: np.ndarray, values: np.ndarray) -> Interpolant:
     return _barycentric(times, values)
 
 
+def _cubic_weights(times: np.ndarray, ts: np.ndarray) -> _Weights:
+    node = np.arange(times.size - 3)[:, None] + np.arange(4)  # the four samples of each piece
+    x = times[node]
+    piece = np.searchsorted(times[2:-2], ts, side="right")  # piece min(max(i - 1, 0), n - 4) of step i
+    return _piece_weights(ts, x, _barycentric_weights(x), piece, node)
+
+
 def _cubic(times: np.ndarray, values: np.ndarray) -> Interpolant:
     """Piecewise cubic through the four samples around t (degree n-1 when n < 4)."""
-    n = times.size
-    if n <= 4:
+    if times.size <= 4:
         return _barycentric(times, values)
-    node = np.arange(n - 3)[:, None] + np.arange(4)
-    x, vals = times[node], values[node]  # (n-3, 4) nodes and (n-3, 4, m) values of each piece
-    w = _barycentric_weights(x)  # each piece's own weights, all pieces in one go
-    inner = times[2:-2]
 
-    def batch(ts: np.ndarray) -> np.ndarray:  # piece min(max(i - 1, 0), n - 4) of step i
-        return _barycentric_batch(ts, x, w, vals, np.searchsorted(inner, ts, side="right"))
+    def batch(ts: np.ndarray) -> np.ndarray:
+        return _apply(_weights("cubic", times, ts, _cubic_weights), values)
 
     # one time is a batch of one: the same operations, so the same bits
     return _vectorized(lambda t: batch(np.array([t]))[0], batch)

@@ -15,7 +15,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from cosim.signals import SCHEMES, Segment, SegmentError, check_time_grid
+from cosim import signals
+from cosim.signals import SCHEMES, Segment, SegmentError, check_time_grid, interpolant
 
 props = settings(
     max_examples=200, derandomize=True, database=None, deadline=None, suppress_health_check=[HealthCheck.too_slow]
@@ -330,3 +331,33 @@ def test_array_shapes(scheme: str) -> None:
     assert f(np.array([0.05, 0.15, 0.3])).shape == (3, 2)
     assert f(np.empty(0)).shape == (0, 2)
     assert f([0.05, 0.35]).tobytes() == np.array([f(0.05), f(0.35)]).tobytes()
+
+
+@pytest.mark.parametrize("scheme", list(SCHEMES))
+def test_interpolants_on_one_grid_share_weights_never_values(scheme: str) -> None:
+    """The weights kept per (scheme, grid, times) serve other values on that grid, and only that grid."""
+    n = 9 if scheme == "lagrange" else 65
+    grid = np.linspace(10.0, 14.48, n)
+    ts = np.sort(np.concatenate([grid, 0.5 * (grid[1:] + grid[:-1]), [9.9, 14.6]]))  # RK-like times, and beyond
+    rng = np.random.default_rng(7)
+    v1, v2 = rng.normal(size=(n, 3)), rng.normal(size=(n, 3))
+    moved = grid.copy()
+    moved[n // 2] += 0.3 * (grid[1] - grid[0])  # another grid, the same times asked for
+    first = interpolant(grid, v1, scheme)(ts)
+    second = interpolant(grid, v2, scheme)(ts)
+    other = interpolant(moved, v2, scheme)(ts)
+    signals._KEPT_WEIGHTS.clear()
+    for got, (g, v) in ((first, (grid, v1)), (second, (grid, v2)), (other, (moved, v2))):
+        fresh = interpolant(g, v, scheme)(ts)
+        signals._KEPT_WEIGHTS.clear()
+        assert got.tobytes() == fresh.tobytes()
+        assert got.tobytes() == np.array([interpolant(g, v, scheme)(float(t)) for t in ts]).tobytes()
+    assert not np.allclose(second, other)  # the moved sample matters: a key without the grid would miss it
+
+
+def test_the_kept_weights_stay_bounded() -> None:
+    grid = np.linspace(0.0, 0.4, 5)
+    ts = np.linspace(0.0, 0.4, 9)
+    for i in range(3 * signals.KEPT_WEIGHTS_MAX):
+        interpolant(grid + i, np.ones((5, 2)), "linear")(ts + i)
+        assert len(signals._KEPT_WEIGHTS) <= signals.KEPT_WEIGHTS_MAX
