@@ -197,6 +197,22 @@ def decode_request(payload: bytes) -> Request:
         raise ProtocolError("internal", f"undecodable request ({type(exc).__name__})") from None  # a bug, not the peer
 
 
+_HEAD = pack({"v": PROTOCOL_VERSION, "cmd": ""})[:-1]  # a map's count, "v", the version, "cmd" (then the name)
+
+
+def peek_command(body: bytes | memoryview) -> str | None:
+    """The command of a request laid out as :func:`encode_request` lays it out, read without decoding;
+    ``None`` for any other layout. A hint (e.g. which thread answers it), never a decision: the request is
+    still decoded and checked in full."""
+    head = len(_HEAD)
+    if body[1:head] != _HEAD[1:] or len(body) <= head:
+        return None
+    size = body[head] - 0xA0  # a fixstr (at most 31 bytes): every command name
+    if not 0 < size < 32:
+        return None
+    return bytes(body[head + 1 : head + 1 + size]).decode("ascii", "replace")
+
+
 def request_command(payload: bytes) -> str:
     """Best-effort command name of a payload, for error replies to requests that failed to decode."""
     try:
