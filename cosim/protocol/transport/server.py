@@ -60,7 +60,7 @@ class CommandServer:
         self._rpc = rpc_key(run, runtime.name)
         # requests waiting for the serving thread; ``_busy``: a request is being answered (on either thread).
         # Both change under ``_ready``'s lock, so a request is answered inline only when none came before it.
-        self._queued: collections.deque[tuple[zenoh.Query, zenoh.KeyExpr, Admitted]] = collections.deque()
+        self._queued: collections.deque[tuple[zenoh.Query, zenoh.KeyExpr, Admitted, str | None]] = collections.deque()
         self._busy = False
         self._ready = threading.Condition()
         self._queue_size = queue_size
@@ -87,19 +87,20 @@ class CommandServer:
             payload = query.payload
             admitted, reply = self.gate.admit(payload.to_bytes() if payload is not None else b"")
             if admitted is not None:
-                quick = self._quick(admitted)
+                cmd = peek_command(admitted.body)
+                quick = cmd in QUICK_COMMANDS or (cmd == "run_interval" and self._last_run <= self.inline_limit)
                 with self._ready:
                     inline = quick and not self._busy and not self._queued
                     queued = len(self._queued)
                     if inline:
                         self._busy = True
                     elif queued < self._queue_size:
-                        self._queued.append((query, key_expr, admitted))
+                        self._queued.append((query, key_expr, admitted, cmd))
                         self._ready.notify()
                         return
                 if inline:
                     self.inline_count += 1
-                    self._answer(query, key_expr, admitted)
+                    self._answer(query, key_expr, admitted, cmd)
                     return
                 reply = self.gate.busy(admitted, queued)
             with query:
@@ -108,17 +109,12 @@ class CommandServer:
         except Exception:  # the receive path must survive anything
             log.exception("dropping a query that could not be checked")
 
-    def _quick(self, request: Admitted) -> bool:
-        cmd = peek_command(request.body)
-        return cmd in QUICK_COMMANDS or (cmd == "run_interval" and self._last_run <= self.inline_limit)
-
-    def _answer(self, query: zenoh.Query, key_expr: zenoh.KeyExpr, request: Admitted) -> None:
-        """Answer one request (``_busy`` is set), then let the next one in."""
+    def _answer(self, query: zenoh.Query, key_expr: zenoh.KeyExpr, request: Admitted, cmd: str | None) -> None:
+        """Answer one request (``_busy`` is set), then let the next one in. ``cmd``: its command, peeked."""
         try:
             with query:
                 started = time.perf_counter()
                 reply = self.gate.answer(request)
-                cmd = peek_command(request.body)
                 if cmd == "run_interval":
                     self._last_run = time.perf_counter() - started
                 elif cmd == "configure":  # perhaps another model now: its speed is not known
@@ -137,9 +133,9 @@ class CommandServer:
                 if self._busy or not self._queued:
                     self._ready.wait(0.1)
                     continue
-                query, key_expr, request = self._queued.popleft()
+                query, key_expr, request, cmd = self._queued.popleft()
                 self._busy = True
-            self._answer(query, key_expr, request)
+            self._answer(query, key_expr, request, cmd)
 
     def close(self) -> None:
         for entity in (self._token, self._watch, self._queryable):
@@ -149,5 +145,5 @@ class CommandServer:
                 pass
         with self._ready:  # requests queued behind shutdown are not answered; finalize them
             left, self._queued = list(self._queued), collections.deque()
-        for query, _, _ in left:
+        for query, *_ in left:
             query.__exit__()
