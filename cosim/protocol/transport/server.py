@@ -124,7 +124,8 @@ class CommandServer:
         finally:
             with self._ready:
                 self._busy = False
-                self._ready.notify()
+                if self._queued:
+                    self._ready.notify()
 
     def serve(self) -> None:
         """Serve until ``shutdown`` is requested. The wait wakes every 100 ms, so signals are delivered."""
