@@ -8,8 +8,8 @@ from typing import Any
 import numpy as np
 
 from cosim.subsim import InputFunction, Param, Port, Subsim
-from subsims.aero.model import AeroParams, aero_loads
-from subsims.numerics import input_rows
+from subsims.aero.model import AeroParams, aero_loads_batch
+from subsims.numerics import as_table
 from subsims.satellite import constants as C
 
 
@@ -47,6 +47,5 @@ class Aero(Subsim):
         self, state: np.ndarray, times: np.ndarray, u: InputFunction
     ) -> tuple[dict[str, np.ndarray], np.ndarray]:
         times = np.asarray(times, dtype=np.float64)
-        loads = [aero_loads(v, self.p, self.facets) for v, in input_rows(u, times, {"V_body": 3}, lists=True)]
-        force, torque = (np.array(x, dtype=np.float64).reshape(-1, 3) for x in zip(*loads))
+        force, torque = aero_loads_batch(as_table(u(times)["V_body"], times.size, 3, "V_body"), self.p, self.facets)
         return {"force": force, "torque": torque}, np.empty(0, dtype=np.float64)

@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from subsims.aero.model import AeroParams, aero_loads, box_facets, torque_about_cm
+from subsims.aero.model import AeroParams, aero_loads, aero_loads_batch, box_facets, torque_about_cm
 from subsims.aero.subsim import Aero
 from subsims.satellite import constants as C
 
@@ -158,3 +158,24 @@ def test_each_parameter_is_read_and_checked_by_name(name: str, bad, need: str | 
     with pytest.raises(ValueError, match=r"^unknown aero parameter\(s\) \['density'\]; known: rho, cd, length, "
                                          r"width, height$"):
         AeroParams.from_mapping({"density": 1.0})
+
+
+def test_the_batch_form_equals_the_scalar_form_bit_for_bit(rng: np.random.Generator) -> None:
+    """aero_loads_batch (what the subsim runs, 65 samples a call) against aero_loads (the listing's form, which
+    RK-U runs): every row identical, facet subsets, the zero vector (vecnorm's guard) and NaN included."""
+    pool = random_velocities(rng, 20_000)
+    speed = [float(np.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])) for v in pool.tolist()]
+    squared_differ = [i for i, s in enumerate(speed) if s**2 != s * s]  # C pow(s, 2) is not always s * s
+    assert len(squared_differ) >= 3
+    velocities = np.vstack([pool[:200], pool[squared_differ], np.zeros((1, 3)), [[np.nan, 7000.0, 0.0]],
+                            [[0.0, -7731.0, 0.0]], [[1e-300, 0.0, 0.0]]])
+    p = AeroParams(length=7.0, width=2.5, height=1.5)
+    facets = box_facets(7.0, 2.5, 1.5)
+    for subset in (facets, facets[:1], facets[2:5], facets[3:] + facets[:2]):
+        force, torque = aero_loads_batch(velocities, p, subset)
+        assert force.shape == torque.shape == velocities.shape
+        for v, f, t in zip(velocities, force, torque):
+            want_f, want_t = aero_loads(v.tolist(), p, facets=subset)
+            np.testing.assert_array_equal(f, want_f)
+            np.testing.assert_array_equal(t, want_t)
+    assert np.isnan(force[-3]).all() and not np.isnan(force[:-3]).any()
