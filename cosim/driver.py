@@ -11,6 +11,7 @@ bit-identical to an undisturbed run.
 
 from __future__ import annotations
 
+import os
 import time
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
@@ -43,6 +44,9 @@ T = TypeVar("T")
 
 OnStage = Callable[[int, Outputs], None]
 Revive = Callable[[str], SubsimHandle]  # a new process for the named subsim, configured at the run's start
+
+
+CORES = os.cpu_count() or 1  # a run of fewer subsims leaves a core to the coordinator's own writing
 
 
 @dataclass
@@ -161,6 +165,7 @@ class Coordinator:
         # committed intervals not yet handed to on_interval: recorded while the next run is in flight
         self._unrecorded: list[Interval] = []
         self._on_interval: Callable[[Interval], None] | None = None
+        self._spare_seen = False  # a run left a core idle: intervals are recorded during such runs
 
     @property
     def order(self) -> list[str]:
@@ -221,7 +226,10 @@ class Coordinator:
     def _drive(self, steps: Steps, on_interval: Callable[[Interval], None] | None) -> RunSummary | None:
         """Perform the machine's actions. A committed interval is handed to ``on_interval`` (written, shown)
         once the next run's requests are out, so that writing it overlaps the subsims' work instead of
-        delaying it; whatever is left is handed over before this returns or raises."""
+        delaying it: during the first run of fewer subsims than cores, if the runs have such ones (RF-D's
+        aero alone, not attitude and orbit side by side, which would share two cores three ways), else the
+        first run; at the latest at the next commit. Whatever is left is handed over before this returns
+        or raises."""
         self._on_interval = on_interval
         try:
             return self._perform(steps)
@@ -262,6 +270,7 @@ class Coordinator:
                 action.interval.wall_time = time.perf_counter() - started
                 action.interval.restarts, restarts_before = len(self.restarts) - restarts_before, len(self.restarts)
                 self._journal_commit(action.interval)
+                self._record()  # an interval that found no run to overlap with (at most one waits)
                 self._unrecorded.append(action.interval)
                 started = time.perf_counter()
             elif isinstance(action, Done):
@@ -281,10 +290,13 @@ class Coordinator:
             self._sent[name] = inputs
             pending[name] = _send(handle.start_run_interval, action.times, inputs, interp, commit=name in uncommitted)
         recording: BaseException | None = None
-        try:
-            self._record()  # the last committed interval, while this run's requests are being served
-        except BaseException as exc:  # raised once every request has answered: none is left in flight
-            recording = exc
+        spare = len(pending) < CORES
+        self._spare_seen = self._spare_seen or spare
+        if spare or not self._spare_seen:
+            try:
+                self._record()  # the last committed interval, while this run's requests are being served
+            except BaseException as exc:  # raised once every request has answered: none is left in flight
+                recording = exc
         try:
             results = self._gather(pending, replace=True)
         except _Replaced as replaced:  # who answered has committed what rode on the request

@@ -270,3 +270,30 @@ def test_a_committed_interval_is_recorded_once_the_next_run_is_sent_and_none_is_
         Coordinator(handles, couplings, settings).run(0.0, 0.3, on_interval=lambda iv: log.append(
             ("recorded", float(iv.t[0]))))
     assert [e[1] for e in log if e[0] == "recorded"] == pytest.approx([0.0, 0.1])
+
+
+@pytest.mark.parametrize("cores", [1, 2, 3])
+def test_an_interval_is_recorded_during_a_run_that_leaves_a_core_to_the_coordinator(monkeypatch, cores: int) -> None:
+    """RF-D with a and b side by side, then c: with 2 cores the run of c alone leaves one free, so the writing
+    goes there (the run of a and b would share the cores three ways); with 3 cores already the first run leaves
+    one; with 1 none does, and the first run gets it. Each interval once, in order, never more than one behind."""
+    import cosim.driver
+
+    monkeypatch.setattr(cosim.driver, "CORES", cores)
+    log: list = []
+    handles = {n: LoggedHandle(n, log) for n in ("a", "b", "c")}
+    for h in handles.values():
+        h.configure({"y0": [1.0]})
+    couplings = [Coupling.make("a.u", "c.y", "gain", {"k": -1.0}), Coupling.make("b.u", "c.y"),
+                 Coupling.make("c.u", "a.y")]
+    settings = Settings(method="distributed", interval=0.1, samples=3, order=("a", "b", "c"))
+    Coordinator(handles, couplings, settings).run(0.0, 0.4, on_interval=lambda iv: log.append(
+        ("recorded", float(iv.t[0]))))
+    recorded = [i for i, e in enumerate(log) if e[0] == "recorded"]
+    assert [log[i][1] for i in recorded] == pytest.approx([0.0, 0.1, 0.2, 0.3])
+    after = {1: "b", 2: "c", 3: "b"}[cores]  # the last request sent before the writing: b's ends the {a, b} run
+    for i in recorded[:-1]:
+        assert log[i - 1][:2] == ("sent", after) and log[i - 1][2] == pytest.approx(log[i][1] + 0.1)
+        if cores == 2:  # during the first stage's run of c, not a later one
+            assert [e for e in log[:i] if e[0] == "sent" and e[2] == pytest.approx(log[i][1] + 0.1)] == [
+                ("sent", n, pytest.approx(log[i][1] + 0.1)) for n in ("a", "b", "c")]
