@@ -8,9 +8,13 @@ from typing import Any
 import numpy as np
 
 from cosim.subsim import InputFunction, Param, Port, Subsim
-from subsims.aero.model import AeroParams, aero_loads_batch
+from subsims.aero.model import AeroParams, aero_loads, aero_loads_batch
 from subsims.numerics import as_table
 from subsims.satellite import constants as C
+
+# samples from which one NumPy pass over all of them beats a loop of the scalar form (about 50 us against 2.5 us a
+# sample, measured on the 2-core machine: 17 samples 53 vs 46 us, 33 samples 60 vs 87 us)
+BATCH_FROM = 20
 
 
 class Aero(Subsim):
@@ -47,5 +51,10 @@ class Aero(Subsim):
         self, state: np.ndarray, times: np.ndarray, u: InputFunction
     ) -> tuple[dict[str, np.ndarray], np.ndarray]:
         times = np.asarray(times, dtype=np.float64)
-        force, torque = aero_loads_batch(as_table(u(times)["V_body"], times.size, 3, "V_body"), self.p, self.facets)
+        velocity = as_table(u(times)["V_body"], times.size, 3, "V_body")
+        if times.size >= BATCH_FROM:  # one NumPy pass; both forms give the same bits
+            force, torque = aero_loads_batch(velocity, self.p, self.facets)
+        else:
+            loads = [aero_loads(v, self.p, self.facets) for v in velocity.tolist()]
+            force, torque = (np.array(x, dtype=np.float64).reshape(-1, 3) for x in zip(*loads))
         return {"force": force, "torque": torque}, np.empty(0, dtype=np.float64)

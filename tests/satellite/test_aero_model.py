@@ -79,12 +79,13 @@ def test_zero_velocity_and_zero_density() -> None:
     assert np.all(np.array(force) == 0.0) and np.all(np.array(torque) == 0.0)
 
 
-def test_adapter_contract_and_purity() -> None:
+@pytest.mark.parametrize("samples", [5, 65])  # below and above BATCH_FROM: the loop and the NumPy pass
+def test_adapter_contract_and_purity(samples: int) -> None:
     sim = Aero()
     assert Aero.algebraic is True
     state = sim.initial_state({})
     assert state.shape == (0,)
-    times = np.linspace(0.0, 0.4, 5)
+    times = np.linspace(0.0, 0.4, samples)
     seen: list[float] = []
 
     def u(t: float | np.ndarray) -> dict[str, np.ndarray]:  # t (k,) -> (k, 3)
@@ -97,7 +98,7 @@ def test_adapter_contract_and_purity() -> None:
     assert set(out1) == set(Aero.outputs) == {"force", "torque"}
     assert end1.shape == (0,)
     for name in out1:
-        assert out1[name].shape == (5, 3)
+        assert out1[name].shape == (samples, 3)
         np.testing.assert_array_equal(out1[name], out2[name])
     for j, t in enumerate(times):
         force, torque = aero_loads(u(t)["V_body"].tolist(), sim.p)
