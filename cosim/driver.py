@@ -14,7 +14,7 @@ from __future__ import annotations
 import os
 import time
 from collections import deque
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, NoReturn, TypeVar
 
@@ -43,6 +43,9 @@ from cosim.handles import Description, IntervalResult, SubsimHandle, SubsimState
 T = TypeVar("T")
 
 OnStage = Callable[[int, Outputs], None]
+# Called with each committed interval, in order; if it returns an iterator, the interval is recorded one item
+# at a time, in the coordinator's idle moments (``cosim.runner`` writes a result file so).
+OnInterval = Callable[[Interval], Iterable[object] | None]
 Revive = Callable[[str], SubsimHandle]  # a new process for the named subsim, configured at the run's start
 
 
@@ -164,7 +167,8 @@ class Coordinator:
         self._uncommitted: set[str] = set()
         # committed intervals not yet handed to on_interval: recorded while the next run is in flight
         self._unrecorded: list[Interval] = []
-        self._on_interval: Callable[[Interval], None] | None = None
+        self._recording: Iterator[object] | None = None  # the steps left of the interval being recorded
+        self._on_interval: OnInterval | None = None
         self._spare_seen = False  # a run left a core idle: intervals are recorded during such runs
 
     @property
@@ -192,7 +196,7 @@ class Coordinator:
     # --- a run --------------------------------------------------------------------------------
 
     def run(
-        self, t_start: float, t_stop: float, on_interval: Callable[[Interval], None] | None = None
+        self, t_start: float, t_stop: float, on_interval: OnInterval | None = None
     ) -> RunSummary:
         """Advance whole intervals from ``t_start`` (every subsim's committed time) past ``t_stop``."""
         if self.recovery is not None and not self._checkpoints:
@@ -223,13 +227,15 @@ class Coordinator:
 
     # --- performing the machine's actions -------------------------------------------------------
 
-    def _drive(self, steps: Steps, on_interval: Callable[[Interval], None] | None) -> RunSummary | None:
+    def _drive(self, steps: Steps, on_interval: OnInterval | None) -> RunSummary | None:
         """Perform the machine's actions. A committed interval is handed to ``on_interval`` (written, shown)
         once the next run's requests are out, so that writing it overlaps the subsims' work instead of
-        delaying it: during the first run of fewer subsims than cores, if the runs have such ones (RF-D's
-        aero alone, not attitude and orbit side by side, which would share two cores three ways), else the
-        first run; at the latest at the next commit. Whatever is left is handed over before this returns
-        or raises."""
+        delaying it: during runs of fewer subsims than cores, if the runs have such ones (RF-D's aero alone,
+        not attitude and orbit side by side, which would share two cores three ways), in steps between
+        which the coordinator looks for the replies, and stops at the first look that finds them all (an
+        ``on_interval`` that returns an iterator is recorded one item a step); else during the first run,
+        whole. At the latest at the next commit. Whatever is left is handed over before this returns or
+        raises."""
         self._on_interval = on_interval
         try:
             return self._perform(steps)
@@ -237,11 +243,35 @@ class Coordinator:
             self._record()
 
     def _record(self) -> None:
-        """Hand every committed interval not yet recorded to ``on_interval``, in order."""
-        while self._unrecorded:
+        """Hand every committed interval not yet recorded to ``on_interval``, in order, to the end."""
+        while self._record_step():
+            pass
+
+    def _record_step(self) -> bool:
+        """One step of recording (an ``on_interval`` that returns an iterator is recorded one item at a time);
+        False when nothing is left to record."""
+        if self._recording is None:
+            if not self._unrecorded:
+                return False
             interval = self._unrecorded.pop(0)
-            if self._on_interval is not None:
-                self._on_interval(interval)
+            steps = self._on_interval(interval) if self._on_interval is not None else None
+            if steps is None:
+                return True
+            self._recording = iter(steps)
+        try:
+            next(self._recording)
+        except StopIteration:
+            self._recording = None
+        except BaseException:
+            self._recording = None
+            raise
+        return True
+
+    def _record_while_waiting(self, names: Sequence[str]) -> None:
+        """Record in steps until every request to ``names`` has its reply (or nothing is left to record)."""
+        handles = [self.handles[name] for name in names]
+        while not all(h.replied() for h in handles) and self._record_step():
+            pass
 
     def _perform(self, steps: Steps) -> RunSummary | None:
         started = time.perf_counter()
@@ -293,8 +323,11 @@ class Coordinator:
         spare = len(pending) < CORES
         self._spare_seen = self._spare_seen or spare
         if spare or not self._spare_seen:
-            try:
-                self._record()  # the last committed interval, while this run's requests are being served
+            try:  # the last committed interval, while this run's requests are being served
+                if spare:  # in steps, looking at the replies between them: a reply waits one step at most
+                    self._record_while_waiting(list(pending))
+                else:
+                    self._record()
             except BaseException as exc:  # raised once every request has answered: none is left in flight
                 recording = exc
         try:

@@ -74,6 +74,11 @@ class SubsimHandle:
         """Send ``cmd``; return a function that waits for and returns its checked result."""
         raise NotImplementedError
 
+    def replied(self) -> bool:
+        """Whether collecting every request sent so far would return at once (never blocks). In process:
+        always (requests run when sent)."""
+        return True
+
     def _call(self, cmd: str, **args: Any) -> dict:
         return self._begin(cmd, args)()
 

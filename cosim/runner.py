@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import json
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from types import MappingProxyType
@@ -233,8 +233,8 @@ def run_scenario(
                               output_units(session.descriptions), lock=lock)
         bar = Progress(scenario.start, stop, enabled=progress)
 
-        def each(interval: Interval) -> None:
-            writer.write(interval)
+        def each(interval: Interval) -> Iterator[None]:  # in steps: the coordinator writes while it waits
+            yield from writer.write_steps(interval)
             bar.update(interval)
             if on_interval is not None:
                 on_interval(interval)

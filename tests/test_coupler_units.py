@@ -12,7 +12,7 @@ from cosim.coupler.convergence import Tolerance, check, convrg
 from cosim.coupler.couplings import Coupling, SignalRef
 from cosim.coupler.first_guess import first_guess
 from cosim.coupler.order import derive_order, feedback_weight
-from cosim.coupler.relaxation import Settings
+from cosim.coupler.relaxation import Interval, Settings
 from cosim.driver import Coordinator
 from cosim.handles import InProcessHandle
 from subsims.integrator.subsim import Integrator
@@ -236,15 +236,21 @@ def test_run_sends_each_commit_with_the_next_interval_and_commits_all_at_the_end
 class LoggedHandle(InProcessHandle):
     """An in-process integrator that logs when each run_interval is sent (a failing one from ``fail_at`` on)."""
 
-    def __init__(self, name: str, log: list, fail_at: float = math.inf) -> None:
+    def __init__(self, name: str, log: list, fail_at: float = math.inf, polls: int = 0) -> None:
         super().__init__(Integrator(), name)
         self.log, self.fail_at = log, fail_at
+        self.polls, self._unanswered = polls, 0  # replied() says no this many times after each send, as if busy
 
     def start_run_interval(self, times, inputs, interp="linear", commit=False):  # noqa: ANN001, ANN201
         self.log.append(("sent", self.name, float(times[0])))
+        self._unanswered = self.polls
         if times[0] >= self.fail_at:
             raise RuntimeError(f"{self.name} fails at t = {times[0]}")
         return super().start_run_interval(times, inputs, interp, commit)
+
+    def replied(self) -> bool:
+        self._unanswered -= 1
+        return self._unanswered < 0
 
 
 def test_a_committed_interval_is_recorded_once_the_next_run_is_sent_and_none_is_lost_on_failure() -> None:
@@ -274,26 +280,44 @@ def test_a_committed_interval_is_recorded_once_the_next_run_is_sent_and_none_is_
 
 @pytest.mark.parametrize("cores", [1, 2, 3])
 def test_an_interval_is_recorded_during_a_run_that_leaves_a_core_to_the_coordinator(monkeypatch, cores: int) -> None:
-    """RF-D with a and b side by side, then c: with 2 cores the run of c alone leaves one free, so the writing
-    goes there (the run of a and b would share the cores three ways); with 3 cores already the first run leaves
-    one; with 1 none does, and the first run gets it. Each interval once, in order, never more than one behind."""
+    """RF-D with a and b side by side, then c; every request looks busy for its first two looks (replied()).
+    With 2 cores the run of c alone leaves one free: the writing goes there, in steps (it stops at the look
+    that finds the replies), never during the run of a and b (which would share the cores three
+    ways); with 3 cores already the run of a and b leaves one; with 1 none does, and the first run gets the
+    interval whole. Each interval once, in order, never more than one behind."""
     import cosim.driver
 
     monkeypatch.setattr(cosim.driver, "CORES", cores)
     log: list = []
-    handles = {n: LoggedHandle(n, log) for n in ("a", "b", "c")}
+    handles = {n: LoggedHandle(n, log, polls=2) for n in ("a", "b", "c")}
     for h in handles.values():
         h.configure({"y0": [1.0]})
     couplings = [Coupling.make("a.u", "c.y", "gain", {"k": -1.0}), Coupling.make("b.u", "c.y"),
                  Coupling.make("c.u", "a.y")]
     settings = Settings(method="distributed", interval=0.1, samples=3, order=("a", "b", "c"))
-    Coordinator(handles, couplings, settings).run(0.0, 0.4, on_interval=lambda iv: log.append(
-        ("recorded", float(iv.t[0]))))
-    recorded = [i for i, e in enumerate(log) if e[0] == "recorded"]
-    assert [log[i][1] for i in recorded] == pytest.approx([0.0, 0.1, 0.2, 0.3])
-    after = {1: "b", 2: "c", 3: "b"}[cores]  # the last request sent before the writing: b's ends the {a, b} run
-    for i in recorded[:-1]:
-        assert log[i - 1][:2] == ("sent", after) and log[i - 1][2] == pytest.approx(log[i][1] + 0.1)
-        if cores == 2:  # during the first stage's run of c, not a later one
-            assert [e for e in log[:i] if e[0] == "sent" and e[2] == pytest.approx(log[i][1] + 0.1)] == [
-                ("sent", n, pytest.approx(log[i][1] + 0.1)) for n in ("a", "b", "c")]
+
+    def record(iv: Interval):  # noqa: ANN202
+        for k in range(3):
+            log.append(("step", float(iv.t[0]), k))
+            yield
+        log.append(("recorded", float(iv.t[0])))
+
+    Coordinator(handles, couplings, settings).run(0.0, 0.4, on_interval=record)
+    assert [e[1] for e in log if e[0] == "recorded"] == pytest.approx([0.0, 0.1, 0.2, 0.3])
+    end = max(i for i, e in enumerate(log) if e[0] == "sent")  # after it, the run's end records what is left
+    last_sent, steps_in_run = None, 0
+    for i, e in enumerate(log[:end + 1]):
+        if e[0] == "sent":
+            last_sent, steps_in_run = e, 0
+            # never more than one interval behind: those ending before the previous interval are recorded
+            done = [r[1] for r in log[:i] if r[0] == "recorded"]
+            assert all(any(d == pytest.approx(t0) for d in done) for t0 in np.arange(0.0, e[2] - 0.15, 0.1))
+        elif e[0] == "step":
+            steps_in_run += 1
+            assert last_sent is not None and last_sent[1] == {1: "b", 2: "c", 3: "b"}[cores], (i, log[:i + 1])
+            if cores > 1:  # the look that finds the replies ends the writing: two steps a busy request at most
+                assert steps_in_run <= 2 * (cores - 1)  # the run of c, or of a and b
+    if cores == 1:  # whole, right after the first run of the next interval is out
+        for i, e in enumerate(log):
+            if e[0] == "step" and e[2] == 0:
+                assert [x[0] for x in log[i:i + 4]] == ["step", "step", "step", "recorded"]

@@ -66,3 +66,30 @@ def test_a_query_that_zenoh_ends_empty_after_its_timeout_is_a_timeout(cosim_bus:
         assert isinstance(err, SubsimDied) and err.code == "no_responder"
     finally:
         handle.close()
+
+
+def test_looking_for_the_reply_never_blocks_and_the_reply_it_finds_is_the_result(cosim_bus: Bus) -> None:
+    """replied() is what the coordinator asks between steps of writing results: False while the subsim
+    computes, True once the reply is in; the reply it took from the channel is the one the wait returns."""
+    params = {"size": 2, "y0": [1.0, -2.0], "compute_delay": 0.3}
+    remote = cosim_bus.spawn("subsims.integrator", "looked").handle
+    local = InProcessHandle(Integrator())
+    for handle in (remote, local):
+        handle.configure(params)
+    assert remote.replied()  # nothing in flight
+    wait = remote.start_run_interval(TIMES, INPUTS)
+    started, looks = time.perf_counter(), 0
+    while not remote.replied():
+        looks += 1
+        time.sleep(0.01)
+    assert time.perf_counter() - started >= 0.25 and looks >= 10  # said no while the subsim computed
+    got, want = wait(), local.run_interval(TIMES, INPUTS)
+    np.testing.assert_array_equal(got.outputs["y"], want.outputs["y"])
+    # a query that ends without a reply is "replied" too (waiting would not block), and fails when collected
+    pending = _Pending(cosim_bus.session.get("cosim/nobody/serves/this", timeout=0.2), zenoh.CancellationToken(),
+                       None, 0.0)
+    deadline = time.monotonic() + 2.0
+    while not pending.ready():
+        assert time.monotonic() < deadline
+        time.sleep(0.01)
+    assert pending.ended and list(pending.all_replies()) == []

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from functools import partial
 from typing import Any
 
@@ -22,13 +22,35 @@ GONE_GRACE = 0.3  # seconds a request may still be answered after its subsim's l
 class _Pending:
     """One request in flight: its reply channel, the token that can cancel it, and its deadline."""
 
-    __slots__ = ("replies", "token", "expires", "hung", "gone", "timeout_at")
+    __slots__ = ("replies", "token", "expires", "hung", "gone", "timeout_at", "early", "ended")
 
     def __init__(self, replies: Any, token: zenoh.CancellationToken, expires: float | None, timeout_at: float) -> None:
         self.replies, self.token, self.expires = replies, token, expires
         self.timeout_at = timeout_at  # when zenoh's own timeout of the query ends it
         self.hung = False
         self.gone = False  # the subsim's liveliness token went while this was in flight
+        self.early: list[zenoh.Reply] = []  # replies taken by ready(), read first by the waiter
+        self.ended = False  # ready() found the channel closed
+
+    def ready(self) -> bool:
+        """True once waiting would not block: a reply came, or the query ended. Never blocks."""
+        if self.early or self.ended:
+            return True
+        try:
+            reply = self.replies.try_recv()
+        except zenoh.ZError:  # closed and empty: the query ended without (another) reply
+            self.ended = True
+            return True
+        if reply is None:
+            return False
+        self.early.append(reply)
+        return True
+
+    def all_replies(self) -> Iterable[zenoh.Reply]:
+        """Every reply, blocking until the query ends: those ready() took first."""
+        yield from self.early
+        if not self.ended:
+            yield from self.replies
 
     def cancel(self) -> None:
         self.hung = not self.gone
@@ -166,6 +188,10 @@ class RemoteHandle(SubsimHandle):
             _WATCHDOG.watch(pending)
         return partial(self._finish, cmd, seq, pending, deadline)  # one frame less per request than a lambda
 
+    def replied(self) -> bool:
+        """Whether every request of this handle has its reply (or has ended): collecting would not block."""
+        return all(pending.ready() for pending in list(self._in_flight))
+
     def _seal(self, body: bytes) -> tuple[int, bytes]:
         if self._sealer is None:
             return -1, body
@@ -180,7 +206,7 @@ class RemoteHandle(SubsimHandle):
         # watchdog's cancel at the deadline); a waiting coordinator leaves the cores to the subsims
         try:
             forged = 0
-            for reply in pending.replies:
+            for reply in pending.all_replies():
                 ok = reply.ok
                 if ok is None:
                     raise self._zenoh_error(cmd, reply)
