@@ -171,9 +171,9 @@ def error_ratio(
     i = int(worst.argmax())
     elsewhere = 0.0
     for ratios, _ in per_stencil.values():  # every signal has the interval's samples: the same stencils
-        apart = np.r_[ratios[:max(i - p - 1, 0)], ratios[i + p + 2:]]  # stencils sharing no sample with i's
-        elsewhere = max(elsewhere, float(apart.max(initial=0.0)))
-    return ErrorEstimate(float(worst[i]), signal, i + (p + 2) // 2, elsewhere)
+        # the stencils sharing no sample with i's
+        elsewhere = max(elsewhere, ratios[:max(i - p - 1, 0)].max(initial=0.0), ratios[i + p + 2:].max(initial=0.0))
+    return ErrorEstimate(float(worst[i]), signal, i + (p + 2) // 2, float(elsewhere))
 
 
 class Rejection(NamedTuple):
