@@ -26,14 +26,14 @@ objects and the results bit-identical to a run over Zenoh, only faster to get) a
 largest deviation per window and when it first exceeds 1 deg (the paper's linear-interpolation runs:
 about 45,000 s).
 
-Measured 2026-11-25 on the project's 2-core machine (3 repeats, 65 samples per interval, res 1e-10 RF-D / 1e-9
+Measured 2026-11-25 on the project's 2-core machine (``--repeats 5``, 65 samples per interval, res 1e-10 RF-D / 1e-9
 RF-C, interval_tol 7e-14 RF-D / 3e-14 RF-C, RF-D in the order attitude -> orbit -> aero): case 1: angles RK-U 0.1 s
-5.8e-11 deg, RF-D auto 2.5e-11, RF-C auto 3.0e-11; position 1.52e-6 m, 9.0e-7, 1.26e-6; case 2: angles 5.5e-11,
+5.8e-11 deg, RF-D auto 2.7e-11, RF-C auto 2.9e-11; position 1.52e-6 m, 9.2e-7, 1.13e-6; case 2: angles 5.5e-11,
 2.6e-11, 3.6e-11; position 7.4e-7, 5.0e-7, 2.4e-7 (position deviations are rounding: they move between 2e-7 and
 1.8e-6 m with small changes of the settings). Marginal wall ratios to RK-U 0.1 s, median (range): case 1 RF-D auto
-2.43 (2.12-2.54), RF-C auto 2.66 (2.55-2.86); case 2 2.26 (2.09-2.44) and 3.11 (2.91-3.59); the paper's settings
-(``--paper``, 2026-11-24): RF-D 21.41 and 21.50, RF-C 20.94 and 21.56. About 0.19-0.22 intervals/s, 0.79-0.84
-(RF-D) and 0.62-0.66 (RF-C) round trips/s. Case 3: both within 1.0e-5 deg of RK-U 0.1 s to 20,000 s.
+1.83 (1.70-2.27), RF-C auto 2.30 (2.02-2.55); case 2 1.81 (1.73-2.00) and 2.79 (2.67-2.98); the paper's settings
+(``--paper``, 2026-11-24): RF-D 21.41 and 21.50, RF-C 20.94 and 21.56. About 0.19-0.22 intervals/s, 0.79-0.81
+(RF-D) and 0.59-0.66 (RF-C) round trips/s. Case 3: both within 1.0e-5 deg of RK-U 0.1 s to 20,000 s.
 """
 
 from __future__ import annotations
