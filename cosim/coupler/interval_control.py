@@ -106,13 +106,10 @@ def remainder_constant(p: int) -> float:
     return float(np.abs(w).max()) / math.factorial(p + 1)
 
 
-def interpolation_error(values: np.ndarray, p: int) -> np.ndarray:
-    """Per channel of equally spaced samples ``values`` (n, m): the estimated largest error of the
-    degree-``p`` interpolant between them, ``C_p max |Delta^(p+1) values|`` (zeros when n < p + 2)."""
-    v = np.asarray(values, dtype=np.float64)
-    if v.shape[0] < p + 2:
-        return np.zeros(v.shape[1])
-    return remainder_constant(p) * np.abs(np.diff(v, n=p + 1, axis=0)).max(axis=0)
+def stencil_errors(values: np.ndarray, p: int) -> np.ndarray:
+    """Per stencil of ``p + 2`` consecutive equally spaced samples ``values`` (n, m) and per channel: the
+    estimated error of the degree-``p`` interpolant there, ``C_p |Delta^(p+1) values|``, shape (n - p - 1, m)."""
+    return remainder_constant(p) * np.abs(np.diff(values, n=p + 1, axis=0))
 
 
 def magnitudes(
@@ -159,7 +156,7 @@ def error_ratio(
         p = degree(scheme, v.shape[0]) if v.shape[0] >= 3 else 0
         if v.shape[0] < max(3, p + 2):
             continue
-        est = remainder_constant(p) * np.abs(np.diff(v, n=p + 1, axis=0))  # (stencils, channels)
+        est = stencil_errors(v, p)
         scale = np.maximum(tol * scales[signal], floor)
         with np.errstate(divide="ignore", invalid="ignore"):
             ratio = np.where(est > 0, est / np.where(scale > 0, scale, np.inf), 0.0)
