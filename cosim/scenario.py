@@ -75,9 +75,8 @@ KEYS: dict[str, dict[str, Key]] = {
         "interval_tol": Key("number", "1e-8", "1",
                             "interval = 'auto': largest estimated interpolation error of every coupled input "
                             "between its samples, relative to that channel's largest magnitude over the interval; "
-                            "a larger estimate rolls the interval back and retries it shorter, except at a kink or "
-                            "jump of a signal (found at the same point twice, not shrinking as a smooth signal's "
-                            "would): that interval is accepted, its ratio in the diagnostics' error column"),
+                            "a larger estimate rolls the interval back and retries it shorter (an interval at "
+                            "interval_min is accepted, its ratio in the diagnostics' error column)"),
         "interval_initial": Key("number", "0.1", "s", "interval = 'auto': length of the first interval"),
         "interval_min": Key("number", "interval_initial / 1024", "s",
                             "interval = 'auto': shortest interval; one that does not converge at it stops the run"),

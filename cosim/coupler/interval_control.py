@@ -32,12 +32,7 @@ is <= 1.
 The controller (what :class:`~cosim.coupler.relaxation.Relaxation` does with it):
 
 - ratio > 1: the interval is rolled back and retried with ``H * max(0.2, 0.8 ratio^(-1/q))``, where
-  ``q = p + 1`` is the estimate's order in ``H`` (n fixed); except at a kink or a jump of a coupled
-  signal (:func:`refining_pays`): when the error sits at the same point as in the previous rejected try,
-  the rest of the interval passes, and the ratio fell with the spacing at less than order ``q / 2``, the
-  try is accepted over the tolerance (its ratio is in the diagnostics) and the next length follows the
-  rest of the interval. Refining there would take tens of tries down to ``interval_min`` and accept the
-  point all the same;
+  ``q = p + 1`` is the estimate's order in ``H`` (n fixed);
 - not converged in ``max_stages``: rolled back and retried on half the length;
 - accepted: the next interval is ``H`` times the smaller of the error factor (at most 2) and a stage
   factor: 2 while intervals converge in fewer than ``interval_stages`` stages, 1 at that many, and
@@ -52,7 +47,6 @@ import functools
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import NamedTuple
 
 import numpy as np
 
@@ -106,10 +100,13 @@ def remainder_constant(p: int) -> float:
     return float(np.abs(w).max()) / math.factorial(p + 1)
 
 
-def stencil_errors(values: np.ndarray, p: int) -> np.ndarray:
-    """Per stencil of ``p + 2`` consecutive equally spaced samples ``values`` (n, m) and per channel: the
-    estimated error of the degree-``p`` interpolant there, ``C_p |Delta^(p+1) values|``, shape (n - p - 1, m)."""
-    return remainder_constant(p) * np.abs(np.diff(values, n=p + 1, axis=0))
+def interpolation_error(values: np.ndarray, p: int) -> np.ndarray:
+    """Per channel of equally spaced samples ``values`` (n, m): the estimated largest error of the
+    degree-``p`` interpolant between them, ``C_p max |Delta^(p+1) values|`` (zeros when n < p + 2)."""
+    v = np.asarray(values, dtype=np.float64)
+    if v.shape[0] < p + 2:
+        return np.zeros(v.shape[1])
+    return remainder_constant(p) * np.abs(np.diff(v, n=p + 1, axis=0)).max(axis=0)
 
 
 def magnitudes(
@@ -124,78 +121,31 @@ def magnitudes(
     return out
 
 
-class ErrorEstimate(NamedTuple):
-    """An interval's error ratio (<= 1: accepted) and where it is.
-
-    ``at``: the sample at the middle of the worst finite-difference stencil; ``elsewhere``: the largest
-    ratio over the stencils that share no sample with that one (every signal): how the interval fares
-    apart from its worst point."""
-
-    ratio: float
-    signal: str
-    at: int
-    elsewhere: float
-
-
 def error_ratio(
     inputs: Mapping[str, np.ndarray], scheme: str, tol: float, seen: Mapping[str, np.ndarray] | None = None,
     floor: float = 0.0,
-) -> ErrorEstimate:
-    """The interval's error ratio over the coupled input signals, the worst signal and sample, and the
-    ratio away from that sample.
+) -> tuple[float, str]:
+    """The interval's error ratio (<= 1: accepted) over the coupled input signals, and the worst signal.
 
     Each channel's estimate over ``tol`` times its largest magnitude so far (this interval and ``seen``,
     the earlier intervals' largest: a signal crossing zero keeps its scale), or over ``floor`` when that
     is larger: the convergence check's absolute tolerance, below which the samples themselves are not
     settled, so no interval length could bring the estimate lower. A channel that has been zero
     throughout has no interpolation error."""
+    worst, name = 0.0, ""
     scales = magnitudes(inputs, seen)
-    per_stencil: dict[str, tuple[np.ndarray, int]] = {}
     for signal, values in inputs.items():
         v = np.asarray(values, dtype=np.float64)
-        p = degree(scheme, v.shape[0]) if v.shape[0] >= 3 else 0
-        if v.shape[0] < max(3, p + 2):
+        if v.shape[0] < 3:
             continue
-        est = stencil_errors(v, p)
+        est = interpolation_error(v, degree(scheme, v.shape[0]))
         scale = np.maximum(tol * scales[signal], floor)
         with np.errstate(divide="ignore", invalid="ignore"):
             ratio = np.where(est > 0, est / np.where(scale > 0, scale, np.inf), 0.0)
-        per_stencil[signal] = ratio.max(axis=1, initial=0.0), p
-    if not per_stencil:
-        return ErrorEstimate(0.0, next(iter(inputs), ""), 0, 0.0)
-    signal = max(per_stencil, key=lambda k: per_stencil[k][0].max())
-    worst, p = per_stencil[signal]
-    i = int(worst.argmax())
-    elsewhere = 0.0
-    for ratios, _ in per_stencil.values():  # every signal has the interval's samples: the same stencils
-        # the stencils sharing no sample with i's
-        elsewhere = max(elsewhere, ratios[:max(i - p - 1, 0)].max(initial=0.0), ratios[i + p + 2:].max(initial=0.0))
-    return ErrorEstimate(float(worst[i]), signal, i + (p + 2) // 2, float(elsewhere))
-
-
-class Rejection(NamedTuple):
-    """A try rolled back for its error: its ratio, where (s) and its sample spacing (s)."""
-
-    ratio: float
-    at: float
-    spacing: float
-
-
-def refining_pays(previous: Rejection | None, now: Rejection, elsewhere: float, q: int) -> bool:
-    """Whether a try rejected for its error should be retried shorter.
-
-    Not when the error sits at one point (``elsewhere`` <= 1: the rest of the interval passes) where
-    the previous rejected try's error also sat, and it fell with the sample spacing at less than half
-    the estimate's order ``q``: a kink or a jump in a coupled signal (the aerodynamics' facets turning
-    to the flow), whose estimate falls as h or not at all, so that shrinking would only chase the
-    point down to ``interval_min`` (tens of tries) and accept it there all the same. A smooth signal's
-    estimate falls as h^q: it is refined as before."""
-    if previous is None or elsewhere > 1.0 or not now.spacing < 0.95 * previous.spacing:
-        return True
-    if abs(now.at - previous.at) > 2.0 * (now.spacing + previous.spacing):
-        return True  # another place
-    observed = math.log(previous.ratio / now.ratio) / math.log(previous.spacing / now.spacing)
-    return observed >= q / 2
+        r = float(ratio.max(initial=0.0))
+        if r > worst or not name:
+            worst, name = r, signal
+    return worst, name
 
 
 def order(scheme: str, samples: int) -> int:

@@ -36,12 +36,10 @@ from cosim.coupler.couplings import Coupling
 from cosim.coupler.first_guess import POLICIES, first_guess
 from cosim.coupler.interval_control import (
     IntervalControl,
-    Rejection,
     error_ratio,
     magnitudes,
     next_length,
     order,
-    refining_pays,
     retry_length,
 )
 from cosim.coupler.plan import Plan
@@ -221,7 +219,6 @@ class Relaxation:
         self._previous: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # converged inputs of the last interval
         self.round_trips = self.requests = 0  # Run actions and subsim runs emitted so far
         self._magnitudes: dict[str, np.ndarray] = {}  # interval = "auto": largest |input| per channel so far
-        self._rejected: Rejection | None = None  # interval = "auto": the last try rolled back for its error
 
     def _action(self, stage: int, times: np.ndarray, inputs: dict[str, dict[str, np.ndarray]]) -> Run:
         self.round_trips += 1
@@ -295,16 +292,11 @@ class Relaxation:
                         raise
                     H, rejected = retry_length(H, math.inf, q, control), rejected + 1
                     continue
-                est = error_ratio(interval.inputs, s.interp, control.tol, self._magnitudes, s.tol.abs)
-                ratio, growth = est.ratio, est.ratio
+                ratio, _ = error_ratio(interval.inputs, s.interp, control.tol, self._magnitudes, s.tol.abs)
                 if ratio > 1.0 and H > control.minimum and t1 - t > control.minimum:
-                    here = Rejection(ratio, float(times[est.at]), (t1 - t) / (times.size - 1))
-                    if refining_pays(self._rejected, here, est.elsewhere, q):
-                        self._rejected = here
-                        yield Rollback(t, t1)
-                        H, rejected = retry_length(min(H, t1 - t), ratio, q, control), rejected + 1
-                        continue
-                    growth = est.elsewhere  # a kink accepted: the next length follows the rest of the interval
+                    yield Rollback(t, t1)
+                    H, rejected = retry_length(min(H, t1 - t), ratio, q, control), rejected + 1
+                    continue
                 break
             interval.halvings, interval.error = rejected, ratio
             self._magnitudes = magnitudes(interval.inputs, self._magnitudes)
@@ -312,7 +304,7 @@ class Relaxation:
             summary.add(interval)
             if t1 - t >= H * (1 - 1e-9):  # a clipped last interval says nothing about a longer one
                 stages = interval.stages if guessed or s.first_guess != "extrapolate" else 1  # the error decides
-                H = next_length(H, growth, stages, q, control)
+                H = next_length(H, ratio, stages, q, control)
             t = t1
         summary.round_trips, summary.requests = self.round_trips - trips, self.requests - requests
         yield Done(summary)
