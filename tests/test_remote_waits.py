@@ -77,14 +77,16 @@ def test_looking_for_the_reply_never_blocks_and_the_reply_it_finds_is_the_result
     for handle in (remote, local):
         handle.configure(params)
     assert remote.replied()  # nothing in flight
-    wait = remote.start_run_interval(TIMES, INPUTS)
-    started, looks = time.perf_counter(), 0
-    while not remote.replied():
-        looks += 1
-        time.sleep(0.01)
-    assert time.perf_counter() - started >= 0.25 and looks >= 10  # said no while the subsim computed
-    got, want = wait(), local.run_interval(TIMES, INPUTS)
-    np.testing.assert_array_equal(got.outputs["y"], want.outputs["y"])
+    want = local.run_interval(TIMES, INPUTS)
+    for deadline in (None, 1.0):  # session.get, then the declared querier (requests with a short deadline)
+        remote.deadline = deadline
+        wait = remote.start_run_interval(TIMES, INPUTS)
+        started, looks = time.perf_counter(), 0
+        while not remote.replied():
+            looks += 1
+            time.sleep(0.01)
+        assert time.perf_counter() - started >= 0.25 and looks >= 10  # said no while the subsim computed
+        np.testing.assert_array_equal(wait().outputs["y"], want.outputs["y"])
     # a query that ends without a reply is "replied" too (waiting would not block), and fails when collected
     pending = _Pending(cosim_bus.session.get("cosim/nobody/serves/this", timeout=0.2), zenoh.CancellationToken(),
                        None, 0.0)
