@@ -127,18 +127,25 @@ class ResultWriter:
     def write_steps(self, interval: Interval) -> Iterator[None]:
         """:meth:`write` in steps: it pauses after formatting every ``ROWS_PER_STEP`` rows, so that a caller
         can do it while waiting for something else and look again between steps. The files are appended
-        to in the last step, the interval whole."""
+        to in the last step, the interval whole; a signal that stops the run during a step is raised once the
+        interval is written (as inside :func:`cosim.interrupt.deferred`)."""
         rows = np.asarray(self.rows(interval), dtype=np.float64)
         if self.t_last is not None and rows.shape[0] and rows[0, 0] == self.t_last:
             rows = rows[1:]
-        if self._npz:
-            data = rows.astype("<f8").tobytes()
-        else:
-            values, text = rows.tolist(), []
+        values: list[list[float]] = [] if self._npz else rows.tolist()
+        text: list[str] = []
+        try:
             for start in range(0, len(values), ROWS_PER_STEP):
                 text.extend(map(_fmt, values[start:start + ROWS_PER_STEP]))
                 yield
-            data = "".join(text).encode()
+        except KeyboardInterrupt:  # the signal of a stopping run: this committed interval still goes in whole
+            text.extend(map(_fmt, values[len(text):]))
+            self._append(interval, rows, text)
+            raise
+        self._append(interval, rows, text)
+
+    def _append(self, interval: Interval, rows: np.ndarray, text: list[str]) -> None:
+        data = rows.astype("<f8").tobytes() if self._npz else "".join(text).encode()
         with interrupt.deferred():  # a signal waits until the interval is written whole
             assert self._data is not None and self._diag is not None, "write after close"
             try:

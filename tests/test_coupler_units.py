@@ -321,3 +321,38 @@ def test_an_interval_is_recorded_during_a_run_that_leaves_a_core_to_the_coordina
         for i, e in enumerate(log):
             if e[0] == "step" and e[2] == 0:
                 assert [x[0] for x in log[i:i + 4]] == ["step", "step", "step", "recorded"]
+
+
+def test_a_stop_while_an_interval_is_being_recorded_in_steps_still_records_it_whole() -> None:
+    """A signal that stops the run between two steps of recording (here: while the coordinator looks for a
+    reply) leaves the interval's steps where they were; the run's end finishes them, so every committed
+    interval is recorded, in order, before the stop propagates."""
+    log: list = []
+
+    class Stopping(LoggedHandle):
+        def replied(self) -> bool:
+            if sum(e[0] == "step" for e in log) == 2 and not any(e[0] == "stop" for e in log):
+                log.append(("stop",))
+                raise KeyboardInterrupt
+            return super().replied()
+
+    handles = {n: (Stopping if n == "c" else LoggedHandle)(n, log, polls=3) for n in ("a", "b", "c")}
+    for h in handles.values():
+        h.configure({"y0": [1.0]})
+    couplings = [Coupling.make("a.u", "c.y", "gain", {"k": -1.0}), Coupling.make("b.u", "c.y"),
+                 Coupling.make("c.u", "a.y")]
+    settings = Settings(method="distributed", interval=0.1, samples=3, order=("a", "b", "c"))
+
+    def record(iv: Interval):  # noqa: ANN202
+        for k in range(3):
+            log.append(("step", float(iv.t[0]), k))
+            yield
+        log.append(("recorded", float(iv.t[0])))
+
+    committed: list[float] = []
+    coordinator = Coordinator(handles, couplings, settings)
+    with pytest.raises(KeyboardInterrupt):
+        coordinator.run(0.0, 1.0, on_interval=lambda iv: (committed.append(float(iv.t[0])), record(iv))[1])
+    stop = log.index(("stop",))
+    assert [e[1] for e in log if e[0] == "recorded"] == pytest.approx(committed) and committed
+    assert any(e[0] == "step" for e in log[stop:])  # the interrupted interval's steps were finished after the stop

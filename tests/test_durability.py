@@ -528,3 +528,37 @@ def test_an_npz_that_cannot_be_built_keeps_its_stream_and_says_how_to_recover(
     assert not out.exists() and stream_path(out).exists() and not out.with_name("w.npz.lock").exists()
     assert "5 samples" in results.recover(out)
     assert read_results(out)[1].shape == (5, 2)
+
+
+def test_a_signal_between_the_steps_of_a_write_still_writes_the_whole_interval(tmp_path: Path,
+                                                                               monkeypatch: pytest.MonkeyPatch) -> None:
+    """The coordinator writes an interval in steps while it waits (ResultWriter.write_steps); a signal that
+    stops the run while a step formats rows must not lose that committed interval: it is written whole, then the
+    stop goes on (the steps run outside deferred(), so that the wait is not held up)."""
+    import cosim.results as results
+    from cosim import interrupt
+    from cosim.coupler.couplings import SignalRef
+    from cosim.coupler.relaxation import Interval
+    from cosim.results import ResultWriter
+
+    out = tmp_path / "s.csv"
+    writer = ResultWriter(out, [(SignalRef("m", "x"), 1)], {"m.x": "m"})
+    real_fmt, calls = results._fmt, [0]
+
+    def signalled_fmt(row: list) -> str:  # SIGTERM while the sixth row is formatted (the second step)
+        calls[0] += 1
+        if calls[0] == 6:
+            os.kill(os.getpid(), signal.SIGTERM)
+        return real_fmt(row)
+
+    monkeypatch.setattr(results, "_fmt", signalled_fmt)
+    t = np.linspace(0.0, 1.0, 11)
+    with interrupt.handling():
+        steps = writer.write_steps(Interval(t, {"m": {"x": t[:, None] ** 2}}, {}, 2, {}))
+        with pytest.raises(interrupt.Interrupted):
+            for _ in steps:
+                pass
+        writer.close()
+    data = read_results(out)[1]
+    assert data.shape == (11, 2) and np.array_equal(data[:, 1], t**2)
+    assert len(diag_rows(out.with_name("s.csv.diag.csv"))) == 1
