@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
 
 import numpy as np
 import pytest
@@ -278,18 +279,8 @@ def test_a_committed_interval_is_recorded_once_the_next_run_is_sent_and_none_is_
     assert [e[1] for e in log if e[0] == "recorded"] == pytest.approx([0.0, 0.1])
 
 
-@pytest.mark.parametrize("cores", [1, 2, 3])
-def test_an_interval_is_recorded_during_a_run_that_leaves_a_core_to_the_coordinator(monkeypatch, cores: int) -> None:
-    """RF-D with a and b side by side, then c; every request looks busy for its first two looks (replied()).
-    With 2 cores the run of c alone leaves one free: the writing goes there, in steps (it stops at the look
-    that finds the replies), never during the run of a and b (which would share the cores three
-    ways); with 3 cores already the run of a and b leaves one; with 1 none does, and the first run gets the
-    interval whole. Each interval once, in order, never more than one behind."""
-    import cosim.driver
-
-    monkeypatch.setattr(cosim.driver, "CORES", cores)
-    log: list = []
-    handles = {n: LoggedHandle(n, log, polls=2) for n in ("a", "b", "c")}
+def recorded_in_steps(handles: dict[str, LoggedHandle], log: list) -> tuple[Coordinator, Callable]:
+    """RF-D over a and b side by side, then c, and an on_interval that records an interval in three steps, logged."""
     for h in handles.values():
         h.configure({"y0": [1.0]})
     couplings = [Coupling.make("a.u", "c.y", "gain", {"k": -1.0}), Coupling.make("b.u", "c.y"),
@@ -302,7 +293,22 @@ def test_an_interval_is_recorded_during_a_run_that_leaves_a_core_to_the_coordina
             yield
         log.append(("recorded", float(iv.t[0])))
 
-    Coordinator(handles, couplings, settings).run(0.0, 0.4, on_interval=record)
+    return Coordinator(handles, couplings, settings), record
+
+
+@pytest.mark.parametrize("cores", [1, 2, 3])
+def test_an_interval_is_recorded_during_a_run_that_leaves_a_core_to_the_coordinator(monkeypatch, cores: int) -> None:
+    """RF-D with a and b side by side, then c; every request looks busy for its first two looks (replied()).
+    With 2 cores the run of c alone leaves one free: the writing goes there, in steps (it stops at the look
+    that finds the replies), never during the run of a and b (which would share the cores three
+    ways); with 3 cores already the run of a and b leaves one; with 1 none does, and the first run gets the
+    interval whole. Each interval once, in order, never more than one behind."""
+    import cosim.driver
+
+    monkeypatch.setattr(cosim.driver, "CORES", cores)
+    log: list = []
+    coordinator, record = recorded_in_steps({n: LoggedHandle(n, log, polls=2) for n in ("a", "b", "c")}, log)
+    coordinator.run(0.0, 0.4, on_interval=record)
     assert [e[1] for e in log if e[0] == "recorded"] == pytest.approx([0.0, 0.1, 0.2, 0.3])
     end = max(i for i, e in enumerate(log) if e[0] == "sent")  # after it, the run's end records what is left
     last_sent, steps_in_run = None, 0
@@ -337,20 +343,8 @@ def test_a_stop_while_an_interval_is_being_recorded_in_steps_still_records_it_wh
             return super().replied()
 
     handles = {n: (Stopping if n == "c" else LoggedHandle)(n, log, polls=3) for n in ("a", "b", "c")}
-    for h in handles.values():
-        h.configure({"y0": [1.0]})
-    couplings = [Coupling.make("a.u", "c.y", "gain", {"k": -1.0}), Coupling.make("b.u", "c.y"),
-                 Coupling.make("c.u", "a.y")]
-    settings = Settings(method="distributed", interval=0.1, samples=3, order=("a", "b", "c"))
-
-    def record(iv: Interval):  # noqa: ANN202
-        for k in range(3):
-            log.append(("step", float(iv.t[0]), k))
-            yield
-        log.append(("recorded", float(iv.t[0])))
-
+    coordinator, record = recorded_in_steps(handles, log)
     committed: list[float] = []
-    coordinator = Coordinator(handles, couplings, settings)
     with pytest.raises(KeyboardInterrupt):
         coordinator.run(0.0, 1.0, on_interval=lambda iv: (committed.append(float(iv.t[0])), record(iv))[1])
     stop = log.index(("stop",))
