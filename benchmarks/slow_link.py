@@ -35,6 +35,7 @@ import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -205,10 +206,10 @@ def subsims_through_relay(delay: float) -> Iterator[dict[str, RelayProcess]]:
     original = launch.subsim_command
 
     def redirected(module: str, endpoint: str, run: str, name: str, model: str | None = None,
-                   python: str = sys.executable) -> list[str]:
+                   **options: Any) -> list[str]:
         if endpoint not in relays:
             relays[endpoint] = RelayProcess(endpoint, delay)
-        return original(module, relays[endpoint].endpoint, run, name, model, python)
+        return original(module, relays[endpoint].endpoint, run, name, model, **options)
 
     launch.subsim_command = redirected  # Bus.spawn looks the name up at each call
     try:

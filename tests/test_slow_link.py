@@ -97,3 +97,15 @@ def test_the_router_endpoint_is_parsed() -> None:
     assert slow_link.parse_tcp_endpoint("tcp/[::1]:7447") == ("::1", 7447)
     with pytest.raises(ValueError):
         slow_link.parse_tcp_endpoint("udp/127.0.0.1:7447")
+
+
+def test_a_whole_run_goes_through_the_relay_and_pays_its_delay() -> None:
+    """run_once as the benchmark calls it: the subsims connect through a relay process, the run completes with
+    the same requests as a direct one, and each of its sequential round trips pays both delays (caught: the
+    launch command's options changing under the relay's redirection)."""
+    scenario = Path(__file__).resolve().parents[1] / "scenarios" / "oscillator.toml"
+    direct = slow_link.run_once(scenario, "distributed", 0.5, None)
+    delayed = slow_link.run_once(scenario, "distributed", 0.5, DELAY)
+    assert delayed["requests"] == direct["requests"] > 0
+    assert delayed["span"] == direct["span"] > 0
+    assert delayed["wall_s"] >= 2 * DELAY * delayed["requests"]
