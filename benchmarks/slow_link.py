@@ -19,7 +19,8 @@ delay added per request (also in delays) and per simulated second, relative to t
 (which isolates the delay from the relay's own cost, an extra Python hop).
 RF-D waits for its round trips one after another, so it pays about two delays per request; RF-C sends the
 requests of a stage together, so a stage pays about two delays whatever the number of subsims.
-``scenarios/satellite/case1-auto.toml`` (automatic interval control), when present, is run too.
+``scenarios/satellite/case1-auto.toml`` (automatic interval control), when present, is run too, with each
+method, to ``--auto-stop``.
 """
 
 from __future__ import annotations
@@ -268,25 +269,27 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--delay-ms", type=float, nargs="+", default=[0.5], help="delay each way, ms")
     p.add_argument("--stop", type=float, default=200.0, help="problem time of each run, s")
+    p.add_argument("--auto-stop", type=float, default=2000.0,
+                   help="problem time of the case1-auto.toml runs, s (its intervals grow to about 11 s)")
     p.add_argument("--methods", nargs="+", default=["distributed", "centralized"])
     p.add_argument("--repeat", type=int, default=1, help="runs per link, interleaved; the median wall time counts")
     args = p.parse_args(argv)
-    runs = [(ROOT / "scenarios" / "satellite" / "case1.toml", m) for m in args.methods]
+    runs = [(ROOT / "scenarios" / "satellite" / "case1.toml", m, args.stop) for m in args.methods]
     auto = ROOT / "scenarios" / "satellite" / "case1-auto.toml"
     if auto.exists():
-        runs.append((auto, None))
+        runs += [(auto, m, args.auto_stop) for m in args.methods]
     else:
         print(f"({auto.relative_to(ROOT)} does not exist: not run)")
-    print(f"problem time {args.stop:g} s per run; links: direct, relay with delays each way of "
-          + ", ".join(f"{d:g} ms" for d in [0.0, *args.delay_ms]))
+    print(f"problem time {args.stop:g} s per run ({args.auto_stop:g} s with automatic intervals); links: direct, "
+          "relay with delays each way of " + ", ".join(f"{d:g} ms" for d in [0.0, *args.delay_ms]))
     print(f"{'scenario':14s} {'method':12s} {'link':>9s} {'wall s':>8s} {'requests':>9s} {'req/sim s':>10s} "
           f"{'stages':>7s} {'added wall per request':>23s} {'added wall per sim s':>21s}")
     links = [None, 0.0, *[d / 1e3 for d in args.delay_ms if d > 0]]
-    for path, method in runs:
+    for path, method, stop in runs:
         results: dict[float | None, list[dict]] = {link: [] for link in links}
         for _ in range(args.repeat):  # interleaved, so that load drifts hit every link alike
             for link in links:
-                results[link].append(run_once(path, method, args.stop, link))
+                results[link].append(run_once(path, method, stop, link))
         reference = None
         for delay in links:
             r = sorted(results[delay], key=lambda x: x["wall_s"])[len(results[delay]) // 2]  # the median run
