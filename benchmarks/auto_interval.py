@@ -26,15 +26,16 @@ objects and the results bit-identical to a run over Zenoh, only faster to get) a
 largest deviation per window and when it first exceeds 1 deg (the paper's linear-interpolation runs:
 about 45,000 s).
 
-Measured 2026-11-25 on the project's 2-core machine (``--repeats 5``, 65 samples per interval, res 1e-10 RF-D / 1e-9
-RF-C, interval_tol 7e-14 RF-D / 3e-14 RF-C, interval_min 0.4 s, RF-D in the order attitude -> orbit -> aero): case 1:
-angles RK-U 0.1 s 5.8e-11 deg, RF-D auto 2.5e-11, RF-C auto 2.9e-11; position 1.52e-6 m, 7.8e-7, 1.27e-6; case 2:
-angles 5.5e-11, 2.6e-11, 3.6e-11; position 7.4e-7, 5.0e-7, 2.4e-7 (position deviations are rounding: they move
-between 2e-7 and 1.8e-6 m with small changes of the settings). Marginal wall ratios to RK-U 0.1 s, median (range):
-case 1 RF-D auto 1.94 (1.79-2.44), RF-C auto 2.54 (2.35-2.91); case 2 1.87 (1.54-2.02) and 2.71 (2.44-3.34); the
-paper's settings (``--paper``, 2026-11-24): RF-D 21.41 and 21.50, RF-C 20.94 and 21.56. About 0.19-0.22
-intervals/s, 0.79-0.82 (RF-D) and 0.60-0.66 (RF-C) round trips/s. Case 3: both within 1.0e-5 deg of RK-U 0.1 s to
-20,000 s (1,903 and 2,017 intervals, 173 and 162 rejected tries).
+Measured 2026-11-25 on the project's 2-core machine (``--repeats 5``; RF-D 129 samples per interval, interval_tol
+7e-14, res 1e-10, in the order attitude -> orbit -> aero; RF-C 65 samples, 3e-14, res 1e-9; interval_min 0.4 s):
+case 1: angles RK-U 0.1 s 5.8e-11 deg, RF-D auto 2.1e-11, RF-C auto 2.9e-11; position 1.52e-6 m, 1.1e-6, 1.27e-6;
+case 2: angles 5.5e-11, 2.3e-11, 3.6e-11; position 7.4e-7, 6.6e-7, 2.4e-7 (position deviations are rounding: they
+move between 2e-7 and 2.5e-6 m with small changes of the settings). Marginal wall ratios to RK-U 0.1 s, median
+(range): case 1 RF-D auto 1.61 (1.51-1.65), RF-C auto 2.26 (2.12-2.58); case 2 1.52 (1.49-1.62) and 2.80
+(2.72-2.91) (RF-D with 65 samples: 1.94 (1.79-2.44) and 1.87 (1.54-2.02)); the paper's settings (``--paper``,
+2026-11-24): RF-D 21.41 and 21.50, RF-C 20.94 and 21.56. RF-D 0.10-0.105 intervals/s and 0.41-0.45 round trips/s,
+RF-C 0.20-0.22 and 0.60-0.66. Case 3: both within 1.0e-5 deg of RK-U 0.1 s to 20,000 s (RF-D 1,198 intervals,
+204 rejected tries; RF-C 2,017 and 162).
 """
 
 from __future__ import annotations

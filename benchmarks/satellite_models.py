@@ -13,9 +13,9 @@ CPU time, the share of it spent inside the subsims' ``advance``, and the ratios 
 coupled runs use ``caseN-auto.toml`` (automatic intervals; RK-U stays at 0.1 s) and every figure is the marginal cost
 from ``--short`` to ``--stop`` seconds, so that the controller's first intervals and the set-up cancel.
 
-Measured 2026-11-25 (``--auto --stop 2000``, case 1, 3 repeats): RF-D 1.61x RK-U's CPU (in advance 1.13x, rest
-0.47x), RF-C 2.12x (1.60x, 0.52x). Paper settings (default, 400 s): RF-D 5.18x (2.53x, 2.65x), RF-C 8.01x
-(4.07x, 3.95x).
+Measured 2026-11-25 (``--auto --stop 2000``, case 1, 3 repeats): RF-D 1.63x RK-U's CPU (in advance 1.21x, rest
+0.42x; 129 samples an interval), RF-C 2.12x (1.61x, 0.51x). Paper settings (default, 400 s): RF-D 5.18x (2.53x,
+2.65x), RF-C 8.01x (4.07x, 3.95x).
 """
 
 from __future__ import annotations
