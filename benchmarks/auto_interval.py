@@ -32,11 +32,11 @@ case 1: angles RK-U 0.1 s 5.8e-11 deg, RF-D auto 2.1e-11, RF-C auto 2.9e-11; pos
 case 2: angles 5.5e-11, 2.3e-11, 3.6e-11; position 7.4e-7, 6.6e-7, 2.4e-7 (position deviations are rounding: they
 move between 2e-7 and 2.5e-6 m with small changes of the settings). Marginal wall ratios to RK-U 0.1 s, median
 (range): case 1 RF-D auto 1.61 (1.51-1.65), RF-C auto 2.26 (2.12-2.58); case 2 1.52 (1.49-1.62) and 2.80
-(2.72-2.91) (RF-D with 65 samples: 1.94 (1.79-2.44) and 1.87 (1.54-2.02)); the paper's settings (``--paper``,
-2026-11-25, 3 repeats): RF-D 22.15 and 21.51, RF-C 22.28 and 21.73. RF-D 0.10-0.105 intervals/s and 0.41-0.45 round trips/s,
-RF-C 0.20-0.22 and 0.60-0.66. Case 3: both within 1.0e-5 deg of RK-U 0.1 s to 20,000 s (RF-D 1,198 intervals,
-204 rejected tries; RF-C 2,017 and 162); with ``--cases --case3-stop 60000``, within 1 deg of it to 52,482 s (RF-D)
-and 52,470 s (RF-C).
+(2.72-2.91) (RF-D with 65 samples: 1.94 (1.79-2.44) and 1.87 (1.54-2.02)); a later run of 3 with ``--paper``:
+RF-D auto 1.76 and 1.45, RF-C auto 2.62 and 2.93 (2.88-3.13), the paper's settings RF-D 22.15 and 21.51, RF-C
+22.28 and 21.73. RF-D 0.10-0.105 intervals/s and 0.41-0.45 round trips/s, RF-C 0.20-0.22 and 0.60-0.66. Case 3:
+both within 1.0e-5 deg of RK-U 0.1 s to 20,000 s (RF-D 1,198 intervals, 204 rejected tries; RF-C 2,017 and 162);
+with ``--cases --case3-stop 60000``, within 1 deg of it to 52,482 s (RF-D) and 52,470 s (RF-C).
 """
 
 from __future__ import annotations
