@@ -144,14 +144,16 @@ class _Weights(NamedTuple):
 
 
 def _apply(weights: _Weights, values: np.ndarray) -> np.ndarray:
-    terms = weights.coef * values[weights.nodes]  # (terms, k, m), each product as the scalar forms compute it
+    # (terms, k, m), each product as the scalar forms compute it; take() gathers the same rows as values[nodes]
+    # in a third of the time
+    terms = weights.coef * values.take(weights.nodes, axis=0)
     out = terms[0] + terms[1] if len(terms) > 1 else terms[0]  # (a view of the fresh ``terms``: ours to change)
     for term in terms[2:]:
         out += term
     if weights.den is not None:
         out /= weights.den
     if weights.exact_rows.size:
-        out[weights.exact_rows] = values[weights.exact_nodes]
+        out[weights.exact_rows] = values.take(weights.exact_nodes, axis=0)
     return out
 
 
