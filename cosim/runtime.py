@@ -12,8 +12,7 @@ import os
 import traceback
 from collections import deque
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -24,8 +23,7 @@ from cosim.subsim import ModelError, Port, Subsim, as_ports, resolve_params
 DEFAULT_HISTORY = 32
 
 
-@dataclass(frozen=True)
-class _Trial:
+class _Trial(NamedTuple):  # one per run_interval: a tuple costs a fraction of a frozen dataclass
     epoch: int  # committed epoch the trial started from
     end_time: float
     end_state: np.ndarray
@@ -183,8 +181,9 @@ class Runtime:
         end_state = self._check_state(end_state, state.size, "advance() returned end state", from_model=True)
         if trial is not None:
             self._commit(trial)
-        self.trial = _Trial(self.epoch, float(times[-1]), end_state)
-        return {"t": times, "outputs": checked, "end_time": float(times[-1])}
+        end = float(times[-1])
+        self.trial = _Trial(self.epoch, end, end_state)
+        return {"t": times, "outputs": checked, "end_time": end}
 
     def commit(self) -> dict:
         self._require_configured()
@@ -334,7 +333,7 @@ class Runtime:
         raise CosimError("bad_value", f"inputs: {'; '.join(p for p in parts if p)}; this subsim takes: {known}")
 
     def _check_outputs(self, outputs: Mapping[str, Any], times: np.ndarray) -> dict[str, np.ndarray]:
-        if not isinstance(outputs, Mapping):
+        if type(outputs) is not dict and not isinstance(outputs, Mapping):  # (the common case without the ABC check)
             raise CosimError("internal", f"advance() must return a map of outputs, got {type(outputs).__name__}")
         checked = {}
         for name, port in self.outputs.items():
