@@ -63,6 +63,7 @@ from cosim.protocol.wire import (
     MAX_NESTING,
     Checker,
     Fields,
+    _t_array_checked,
     t_any_map,
     t_array,
     t_array_map,
@@ -522,6 +523,15 @@ def test_a_crashing_checker_fails_the_fuzz_assertions(monkeypatch: pytest.Monkey
     monkeypatch.setitem(messages.RESULTS, "commit", {"time": (broken, True)})
     with pytest.raises(AssertionError, match="crashed.*ZeroDivisionError"):
         decode_reply_totally("commit", encode_result({"time": 1.0}))
+
+
+@given(arrays())
+def test_the_array_fast_path_gives_what_the_checked_path_gives(a: np.ndarray) -> None:
+    """t_array's fast path (well-formed arrays) and the full check it falls back to: the same read-only array."""
+    wire = wire_array(a)
+    fast, checked = t_array(wire, "x"), _t_array_checked(wire, "x")
+    assert (fast.shape, fast.dtype, fast.tobytes()) == (checked.shape, checked.dtype, checked.tobytes())
+    assert not fast.flags.writeable and not checked.flags.writeable
 
 
 def test_named_hostile_arrays_are_rejected() -> None:
