@@ -32,7 +32,7 @@ def integrate_once(f: Callable[[np.ndarray], np.ndarray], times: np.ndarray, y0:
     x, w = gauss_nodes(times.size)
     fs = _node_values(f, times, x)
     steps = (times[1:] - times[:-1])[:, None] * np.einsum("k,skm->sm", w, fs)
-    return np.cumsum(np.vstack([y0[None, :], steps]), axis=0)  # y[i+1] = y[i] + step i, in order
+    return np.cumsum(np.concatenate((y0[None, :], steps)), axis=0)  # y[i+1] = y[i] + step i, in order
 
 
 def integrate_twice(
@@ -44,7 +44,7 @@ def integrate_twice(
     h = times[1:] - times[:-1]
     dv = h[:, None] * np.einsum("k,skm->sm", w, fs)
     moment = (h * h)[:, None] * np.einsum("k,skm->sm", w * (1.0 - x), fs)
-    v = np.cumsum(np.vstack([v0[None, :], dv]), axis=0)
+    v = np.cumsum(np.concatenate((v0[None, :], dv)), axis=0)
     y = np.empty_like(v)
     y[0] = y0
     for i in range(h.size):
