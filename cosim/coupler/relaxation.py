@@ -48,6 +48,7 @@ from cosim.signals import SCHEMES
 METHODS = ("centralized", "distributed")
 
 Outputs = dict[str, dict[str, np.ndarray]]  # subsim -> port -> samples (n, size)
+Evaluations = tuple[tuple[str, Coupling, int], ...]  # couplings with their targets' "subsim.port" and width
 
 
 @dataclass(frozen=True)
@@ -216,7 +217,7 @@ class Relaxation:
         # per subsim, its input ports as (port, "subsim.port", width), built once
         self._ports = {n: [(p, f"{n}.{p}", w) for p, w in plan.inputs[n].items()] for n in plan.names}
         self._sizes = plan.sizes
-        # the couplings as (target "subsim.port", coupling, target width), built once: every stage evaluates them
+        # built once: every stage evaluates the couplings
         self._all = self._evaluations(plan.couplings)
         self._feedback = self._evaluations(plan.feedback)
         self._forward_into = {name: self._evaluations(cs) for name, cs in plan.forward_into.items()}
@@ -331,8 +332,8 @@ class Relaxation:
 
     # --- one interval ----------------------------------------------------------------------------
 
-    def _guess(self, times: np.ndarray, couplings: Sequence[Coupling]) -> dict[str, np.ndarray]:
-        sizes = {str(c.target): self._sizes[c.target] for c in couplings}
+    def _guess(self, times: np.ndarray, couplings: Evaluations) -> dict[str, np.ndarray]:
+        sizes = {k: w for k, _, w in couplings}
         return first_guess(self.settings.first_guess, times, sizes, self._previous, self.settings.interp)
 
     def _inputs_of(self, name: str, signals: Mapping[str, np.ndarray], n: int) -> dict[str, np.ndarray]:
@@ -343,7 +344,7 @@ class Relaxation:
         held = self.plan.held.get(key)
         return np.zeros((n, width)) if held is None else np.tile(np.asarray(held, dtype=np.float64), (n, 1))
 
-    def _evaluations(self, couplings: Sequence[Coupling]) -> tuple[tuple[str, Coupling, int], ...]:
+    def _evaluations(self, couplings: Sequence[Coupling]) -> Evaluations:
         return tuple((str(c.target), c, self._sizes[c.target]) for c in couplings)
 
     def _check(self, new: dict, old: dict, history: dict[str, list[float]]) -> Check:
@@ -355,7 +356,7 @@ class Relaxation:
 
     def _centralized(self, times: np.ndarray) -> Generator[Action, Outputs | None, Interval]:
         n, s, plan = times.size, self.settings, self.plan
-        inputs = self._guess(times, plan.couplings)
+        inputs = self._guess(times, self._all)
         history: dict[str, list[float]] = {}
         previous: dict[str, np.ndarray] | None = None
         for stage in range(s.max_stages):
@@ -374,7 +375,7 @@ class Relaxation:
     def _distributed(self, times: np.ndarray) -> Generator[Action, Outputs | None, Interval]:
         n, s, plan = times.size, self.settings, self.plan
         forward_into = self._forward_into
-        fed_back = self._guess(times, plan.feedback)
+        fed_back = self._guess(times, self._feedback)
         history: dict[str, list[float]] = {}
         for stage in range(s.max_stages):
             inputs = dict(fed_back)
