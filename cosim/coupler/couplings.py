@@ -65,7 +65,7 @@ class Coupling:
         if value.shape != (n, size):
             name = self.transform_name
             raise ValueError(f"coupling {self}: transform {name!r} gave shape {value.shape}, need ({n}, {size})")
-        if np.count_nonzero(np.isfinite(value)) != value.size:  # not .all(): a third of the cost
+        if np.count_nonzero(np.isfinite(value)) != value.size:  # not .all(): its Python wrapper costs more
             raise ValueError(f"coupling {self}: transform {self.transform_name!r} produced NaN or inf")
         return value
 

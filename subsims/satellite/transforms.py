@@ -38,9 +38,9 @@ def _pair(a: np.ndarray, b: np.ndarray, what_a: str, what_b: str) -> tuple[np.nd
     return a, b
 
 
-# rotation321's entries in the rows S1..C3 (_S1.._C3) of [sin phi; cos phi], by form: a b (A00 = C2 C3, A01 = C2 S3,
-# A12 = S1 C2, A22 = C1 C2); -S2 (A02); (x S2) y - u v (A10 = S1 S2 C3 - C1 S3, A21 = C1 S2 S3 - S1 C3) and
-# (x S2) y + u v (A11 = S1 S2 S3 + C1 C3, A20 = C1 S2 C3 + S1 S3)
+# rotation321's entries, in the rows S1 S2 S3 C1 C2 C3 (_S1.._C3) of [sin phi; cos phi], are of four forms:
+# a b (A00 = C2 C3, A01 = C2 S3, A12 = S1 C2, A22 = C1 C2); -S2 (A02); (x S2) y - u v (A10 = S1 S2 C3 - C1 S3,
+# A21 = C1 S2 S3 - S1 C3); (x S2) y + u v (A11 = S1 S2 S3 + C1 C3, A20 = C1 S2 C3 + S1 S3)
 _S1, _S2, _S3, _C1, _C2, _C3 = range(6)
 _FACTORS = np.array([_C2, _C2, _S1, _C1, _C1, _S1, _C1, _S1,  # a of A00 A01 A12 A22, u of A10 A21 A11 A20
                      _C3, _S3, _C2, _C2, _S3, _C3, _C3, _S3,  # b, v
