@@ -269,6 +269,8 @@ class Coordinator:
 
     def _record_while_waiting(self, names: Sequence[str]) -> None:
         """Record in steps until every request to ``names`` has its reply (or nothing is left to record)."""
+        if self._recording is None and not self._unrecorded:  # the common case: no need to look at the replies
+            return
         handles = [self.handles[name] for name in names]
         while not all(h.replied() for h in handles) and self._record_step():
             pass

@@ -48,6 +48,7 @@ from cosim.signals import SCHEMES
 METHODS = ("centralized", "distributed")
 
 Outputs = dict[str, dict[str, np.ndarray]]  # subsim -> port -> samples (n, size)
+Evaluations = tuple[tuple[str, Coupling, int], ...]  # couplings with their targets' "subsim.port" and width
 
 
 @dataclass(frozen=True)
@@ -216,6 +217,10 @@ class Relaxation:
         # per subsim, its input ports as (port, "subsim.port", width), built once
         self._ports = {n: [(p, f"{n}.{p}", w) for p, w in plan.inputs[n].items()] for n in plan.names}
         self._sizes = plan.sizes
+        # built once: every stage evaluates the couplings
+        self._all = self._evaluations(plan.couplings)
+        self._feedback = self._evaluations(plan.feedback)
+        self._forward_into = {name: self._evaluations(cs) for name, cs in plan.forward_into.items()}
         self._previous: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # converged inputs of the last interval
         self.round_trips = self.requests = 0  # Run actions and subsim runs emitted so far
         self._magnitudes: dict[str, np.ndarray] = {}  # interval = "auto": largest |input| per channel so far
@@ -327,8 +332,8 @@ class Relaxation:
 
     # --- one interval ----------------------------------------------------------------------------
 
-    def _guess(self, times: np.ndarray, couplings: Sequence[Coupling]) -> dict[str, np.ndarray]:
-        sizes = {str(c.target): self._sizes[c.target] for c in couplings}
+    def _guess(self, times: np.ndarray, couplings: Evaluations) -> dict[str, np.ndarray]:
+        sizes = {k: w for k, _, w in couplings}
         return first_guess(self.settings.first_guess, times, sizes, self._previous, self.settings.interp)
 
     def _inputs_of(self, name: str, signals: Mapping[str, np.ndarray], n: int) -> dict[str, np.ndarray]:
@@ -339,8 +344,8 @@ class Relaxation:
         held = self.plan.held.get(key)
         return np.zeros((n, width)) if held is None else np.tile(np.asarray(held, dtype=np.float64), (n, 1))
 
-    def _evaluate(self, c: Coupling, outputs: Mapping, n: int) -> np.ndarray:
-        return c.evaluate(outputs, self._sizes[c.target], n)
+    def _evaluations(self, couplings: Sequence[Coupling]) -> Evaluations:
+        return tuple((str(c.target), c, self._sizes[c.target]) for c in couplings)
 
     def _check(self, new: dict, old: dict, history: dict[str, list[float]]) -> Check:
         """The convergence check of one stage; appends each signal's largest residual to ``history``."""
@@ -351,7 +356,7 @@ class Relaxation:
 
     def _centralized(self, times: np.ndarray) -> Generator[Action, Outputs | None, Interval]:
         n, s, plan = times.size, self.settings, self.plan
-        inputs = self._guess(times, plan.couplings)
+        inputs = self._guess(times, self._all)
         history: dict[str, list[float]] = {}
         previous: dict[str, np.ndarray] | None = None
         for stage in range(s.max_stages):
@@ -364,28 +369,28 @@ class Relaxation:
                 if result.converged:
                     return Interval(times, outputs, inputs, stage + 1, history)
             previous = flat
-            inputs = {str(c.target): self._evaluate(c, outputs, n) for c in plan.couplings}
+            inputs = {k: c.evaluate(outputs, w, n) for k, c, w in self._all}
         raise NotConverged(float(times[0]), float(times[-1]), s.max_stages, result.failing, history)
 
     def _distributed(self, times: np.ndarray) -> Generator[Action, Outputs | None, Interval]:
         n, s, plan = times.size, self.settings, self.plan
-        forward_into = plan.forward_into
-        fed_back = self._guess(times, plan.feedback)
+        forward_into = self._forward_into
+        fed_back = self._guess(times, self._feedback)
         history: dict[str, list[float]] = {}
         for stage in range(s.max_stages):
             inputs = dict(fed_back)
             outputs: Outputs = {}
             for level in plan.levels:  # in order; a level's subsims read nothing of each other: one Run
                 for name in level:
-                    for c in forward_into[name]:
-                        inputs[str(c.target)] = self._evaluate(c, outputs, n)
+                    for k, c, w in forward_into[name]:
+                        inputs[k] = c.evaluate(outputs, w, n)
                 runs = {name: self._inputs_of(name, inputs, n) for name in level}
                 outputs.update((yield self._action(stage, times, runs)))
             if self.report_stages:
                 yield StageDone(stage, outputs)
             if not plan.feedback:  # nothing to iterate: a feed-forward chain is exact in one stage
                 return Interval(times, outputs, inputs, stage + 1, history)
-            new = {str(c.target): self._evaluate(c, outputs, n) for c in plan.feedback}
+            new = {k: c.evaluate(outputs, w, n) for k, c, w in self._feedback}
             if stage > 0:
                 result = self._check(new, fed_back, history)
                 if result.converged:

@@ -1,0 +1,114 @@
+"""The satellite's coupling transforms, vectorised, give the bits of the model formulas they were computed
+with (``aero.model.torque_about_cm`` by columns, ``numerics.dcm321_batch``), on random and edge inputs; and
+inputs of the wrong shape are still refused."""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import numpy as np
+import pytest
+
+from subsims.aero.model import torque_about_cm
+from subsims.numerics import dcm321_batch
+from subsims.satellite.transforms import _dcm321, body_to_inertial, inertial_to_body, torque_to_cm
+
+EDGES = np.array([0.0, -0.0, 1.0, -1.0, 5e-324, -5e-324, 2.2250738585072014e-308, 1e-300, 1e300, -1e300,
+                  1.7976931348623157e308, np.inf, -np.inf, np.nan, 0.1, 1e-18, -3.5])
+
+
+def _inputs(n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    a, b = rng.normal(size=(n, 3)) * 10.0 ** rng.integers(-20, 20, size=(n, 3)), rng.normal(size=(n, 3))
+    a.flat[: n], b.flat[-n:] = rng.choice(EDGES, n), rng.choice(EDGES, n)  # edge values among ordinary ones
+    return a, b
+
+
+def _same_bits(x: np.ndarray, y: np.ndarray) -> None:
+    """Equal bit for bit, NaN aside: NaN where the other has NaN, of any sign (which of two NaN operands an
+    operation passes on, and so the sign, depends on NumPy's loop for the memory layout, not on the formula)."""
+    assert x.shape == y.shape and x.dtype == y.dtype == np.float64
+    nan = np.isnan(x)
+    np.testing.assert_array_equal(nan, np.isnan(y))
+    assert np.where(nan, 0.0, x).tobytes() == np.where(nan, 0.0, y).tobytes()
+
+
+def _torque_reference(t: np.ndarray, f: np.ndarray, r_cm: list[float], physical: bool) -> np.ndarray:
+    """The formula column by column, as torque_to_cm computed it before it was vectorised."""
+    return np.column_stack(torque_about_cm(t.T, f.T, np.asarray(r_cm, dtype=np.float64), physical))
+
+
+@pytest.mark.parametrize("n", [1, 5, 65, 200])
+@pytest.mark.parametrize("physical", [False, True])
+@pytest.mark.parametrize("r_cm", [[1.0, 0.1, 0.1], [-0.0, 3e-310, -7.25], [np.inf, 0.0, 1.0]])
+def test_torque_to_cm_bits(n: int, physical: bool, r_cm: list[float]) -> None:
+    for seed in range(5):
+        t, f = _inputs(n, seed)
+        with np.errstate(invalid="ignore", over="ignore"):
+            expected = _torque_reference(t, f, r_cm, physical)
+            _same_bits(torque_to_cm(t, f, r_cm=r_cm, physical=physical), expected)
+            # the checked path (not float64 (n, 3) arrays already): lists, float32, a transposed copy, 1-D
+            _same_bits(torque_to_cm(t.tolist(), f.tolist(), r_cm, physical), expected)
+            _same_bits(torque_to_cm(np.asfortranarray(t), f[::1], tuple(r_cm), physical), expected)
+            t32 = t.astype(np.float32)
+            _same_bits(torque_to_cm(t32, f, r_cm, physical), _torque_reference(t32.astype(np.float64), f, r_cm,
+                                                                                physical))
+            _same_bits(torque_to_cm(t[0], f[0], r_cm, physical), expected[:1])
+
+
+@pytest.mark.parametrize(("torque", "force", "match"), [
+    (np.zeros((5, 3)), np.zeros((4, 3)), "torque has 5 samples but force has 4"),
+    (np.zeros((5, 2)), np.zeros((5, 2)), r"torque must have shape \(n, 3\), got \(5, 2\)"),
+    (np.zeros((5, 3)), np.zeros((5, 3, 1)), r"force must have shape \(n, 3\), got \(5, 3, 1\)"),
+    (np.zeros(4), np.zeros(4), r"torque must have shape \(n, 3\), got \(4,\)"),
+    (np.zeros((0, 3)), np.zeros((1, 3)), "torque has 0 samples but force has 1"),
+])
+def test_torque_to_cm_refuses_bad_shapes(torque: np.ndarray, force: np.ndarray, match: str) -> None:
+    with pytest.raises(ValueError, match=match):
+        torque_to_cm(torque, force)
+
+
+@pytest.mark.parametrize("r_cm", [[1.0, 0.1], [[1.0, 0.1, 0.1]], 1.0])
+def test_torque_to_cm_refuses_bad_r_cm(r_cm: object) -> None:
+    with pytest.raises(ValueError, match="parameter 'r_cm' must be 3 numbers"):
+        torque_to_cm(np.zeros((5, 3)), np.zeros((5, 3)), r_cm=r_cm)  # type: ignore[arg-type]
+
+
+def _frame_reference(v: np.ndarray, phi: np.ndarray, to_body: bool) -> np.ndarray:
+    """The rotations as computed before the DCM was vectorised."""
+    return np.einsum("nij,nj->ni" if to_body else "nji,nj->ni", dcm321_batch(phi), v)
+
+
+@pytest.mark.parametrize("n", [1, 5, 65, 200])
+def test_dcm_bits(n: int) -> None:
+    rng = np.random.default_rng(n)
+    for scale in (1e-300, 1e-8, 1.0, 7.0, 1e5, 1e300):
+        phi = rng.normal(size=(n, 3)) * scale
+        phi.flat[rng.integers(0, phi.size, size=3)] = rng.choice(EDGES, 3)
+        with np.errstate(invalid="ignore"):
+            for p in (phi, np.asfortranarray(phi)):  # sines and cosines of the same layout as dcm321_batch's
+                a = _dcm321(p)
+                assert a.flags.c_contiguous
+                _same_bits(a, dcm321_batch(p))
+
+
+def test_dcm_bits_edge_angles() -> None:
+    """Every combination of edge angles: exact zeros of either sign in the products (signed-zero sums)."""
+    edges = [0.0, -0.0, 5e-324, math.pi / 2, -math.pi, 3 * math.pi / 2, 1e300, np.inf, np.nan]
+    phi = np.array(list(itertools.product(edges, repeat=3)))
+    with np.errstate(invalid="ignore"):
+        _same_bits(_dcm321(phi), dcm321_batch(phi))
+
+
+@pytest.mark.parametrize("n", [1, 5, 65])
+def test_frame_transforms_bits(n: int) -> None:
+    for seed in range(5):
+        v, phi = _inputs(n, seed)
+        with np.errstate(invalid="ignore", over="ignore"):
+            for to_body, transform in ((True, inertial_to_body), (False, body_to_inertial)):
+                expected = _frame_reference(v, phi, to_body)
+                _same_bits(transform(v, phi), expected)
+                _same_bits(transform(v, phi.copy()), expected)  # the remembered DCM
+                _same_bits(transform(v.tolist(), phi.tolist()), expected)
+                _same_bits(transform(v[0], phi[0]), expected[:1])
