@@ -92,6 +92,9 @@ KEYS: dict[str, dict[str, Key]] = {
         "max_stages": Key("integer", "100", "", "stages before an interval counts as not converged"),
         "order": Key("list of strings", "derived", "", "distributed execution order; every subsim once"),
         "max_halvings": Key("integer", "0", "", "times a non-converging interval is retried on its first half"),
+        "speculate": Key("boolean", "false", "",
+                         "distributed: from stage 1 on, run a group beside the one before it on that one's previous "
+                         "outputs, kept when they come back bit for bit the same (fewer round trips, same results)"),
     },
     "coupling.<method>": {},  # the keys of [coupling] but method, for one method only
     "tolerances.<signal>": {

@@ -6,7 +6,10 @@ Distributed (RF-D, Gauss-Seidel, spec §5): subsims run in order; forward coupli
 current stage's outputs at once; only the feedback couplings (sources at or after the target
 in the order) are iterated, and only they are checked. Consecutive subsims that read nothing of
 each other in a stage (a level of the plan) run in one ``Run``, concurrently: the same inputs, so
-the same results, in fewer sequential round trips.
+the same results, in fewer sequential round trips. With ``speculate``, from stage 1 on a level also runs
+beside the level before it, on that level's outputs of the previous stage; it is kept when those outputs come
+back bit for bit the same (its inputs were then exactly the in-order ones: the same results, one round trip
+less), else run again in order.
 Both check from stage 1 on, as the paper's listings do (stage 0 runs on the first guess).
 
 The machine does no I/O and reads no clock. It emits actions and takes results (the h11 pattern)::
@@ -46,6 +49,7 @@ from cosim.coupler.plan import Plan
 from cosim.signals import SCHEMES
 
 METHODS = ("centralized", "distributed")
+RETRY_MISSED = 32  # interval tries after a speculation missed before it is tried again at that level and stage
 
 Outputs = dict[str, dict[str, np.ndarray]]  # subsim -> port -> samples (n, size)
 Evaluations = tuple[tuple[str, Coupling, int], ...]  # couplings with their targets' "subsim.port" and width
@@ -64,6 +68,7 @@ class Settings:
     order: Sequence[str] | None = None  # distributed only; derived when None
     max_halvings: int = 0
     auto: IntervalControl | None = None  # interval = "auto": sized per interval (interval is the first one)
+    speculate: bool = False  # distributed only: run a level beside the one before it when that one repeats its outputs
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
@@ -80,6 +85,8 @@ class Settings:
             raise ValueError(f"max_stages must be an integer >= 2, got {self.max_stages!r}")
         if not isinstance(self.max_halvings, int) or self.max_halvings < 0:
             raise ValueError(f"max_halvings must be an integer >= 0, got {self.max_halvings!r}")
+        if not isinstance(self.speculate, bool):
+            raise ValueError(f"speculate must be true or false, got {self.speculate!r}")
         if self.auto is not None:
             if not isinstance(self.auto, IntervalControl):
                 raise ValueError(f"auto must be an IntervalControl or None, got {self.auto!r}")
@@ -221,6 +228,10 @@ class Relaxation:
         self._all = self._evaluations(plan.couplings)
         self._feedback = self._evaluations(plan.feedback)
         self._forward_into = {name: self._evaluations(cs) for name, cs in plan.forward_into.items()}
+        # per level i: the outputs of level i that level i + 1 reads (what a speculative run of i + 1 must see again)
+        self._read_ahead = [self._read_by(plan.levels[i], plan.levels[i + 1]) for i in range(len(plan.levels) - 1)]
+        self._tries = 0  # interval tries so far (distributed): when a missed speculation is tried again
+        self._missed: dict[tuple[int, int], int] = {}  # (level, stage) -> the try at which it last missed
         self._previous: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # converged inputs of the last interval
         self.round_trips = self.requests = 0  # Run actions and subsim runs emitted so far
         self._magnitudes: dict[str, np.ndarray] = {}  # interval = "auto": largest |input| per channel so far
@@ -347,6 +358,32 @@ class Relaxation:
     def _evaluations(self, couplings: Sequence[Coupling]) -> Evaluations:
         return tuple((str(c.target), c, self._sizes[c.target]) for c in couplings)
 
+    def _read_by(self, level: Sequence[str], readers: Sequence[str]) -> tuple[tuple[str, str], ...]:
+        sources = {(s.subsim, s.port) for name in readers for c in self.plan.forward_into[name] for s in c.sources}
+        return tuple(sorted(src for src in sources if src[0] in level))
+
+    def _ahead(self, i: int, stage: int, previous: Outputs | None, outputs: Outputs, inputs: dict[str, np.ndarray],
+               n: int) -> tuple[tuple[str, ...], dict[str, np.ndarray]] | None:
+        """Level i + 1 and its inputs on level i's outputs of the previous stage, when it is worth running it beside
+        level i; else None. A miss is tried again after ``RETRY_MISSED`` interval tries."""
+        levels = self.plan.levels
+        if not self.settings.speculate or previous is None or i + 1 >= len(levels):
+            return None
+        missed = self._missed.get((i, stage))
+        if missed is not None and self._tries - missed < RETRY_MISSED:
+            return None
+        seen = {**outputs, **{name: previous[name] for name in levels[i]}}
+        ahead = dict(inputs)
+        for name in levels[i + 1]:
+            for k, c, w in self._forward_into[name]:
+                ahead[k] = c.evaluate(seen, w, n)
+        return levels[i + 1], ahead
+
+    def _repeated(self, i: int, outputs: Outputs, previous: Outputs) -> bool:
+        """Whether level i gave, bit for bit, the outputs of the previous stage that level i + 1 reads."""
+        return all(outputs[name][port].tobytes() == previous[name][port].tobytes()
+                   for name, port in self._read_ahead[i])
+
     def _check(self, new: dict, old: dict, history: dict[str, list[float]]) -> Check:
         """The convergence check of one stage; appends each signal's largest residual to ``history``."""
         result = check(new, old, self.settings.tol, self.settings.tolerances)
@@ -377,15 +414,33 @@ class Relaxation:
         forward_into = self._forward_into
         fed_back = self._guess(times, self._feedback)
         history: dict[str, list[float]] = {}
+        previous: Outputs | None = None  # the previous stage's outputs
+        self._tries += 1
         for stage in range(s.max_stages):
             inputs = dict(fed_back)
             outputs: Outputs = {}
-            for level in plan.levels:  # in order; a level's subsims read nothing of each other: one Run
+            i = 0
+            while i < len(plan.levels):  # in order; a level's subsims read nothing of each other: one Run
+                level = plan.levels[i]
                 for name in level:
                     for k, c, w in forward_into[name]:
                         inputs[k] = c.evaluate(outputs, w, n)
                 runs = {name: self._inputs_of(name, inputs, n) for name in level}
-                outputs.update((yield self._action(stage, times, runs)))
+                ahead = self._ahead(i, stage, previous, outputs, inputs, n)
+                if ahead is not None:
+                    runs.update({name: self._inputs_of(name, ahead[1], n) for name in ahead[0]})
+                got = yield self._action(stage, times, runs)
+                outputs.update({name: got[name] for name in level})
+                i += 1
+                if ahead is not None:
+                    assert previous is not None
+                    if self._repeated(i - 1, outputs, previous):  # the inputs it ran on were the in-order ones
+                        outputs.update({name: got[name] for name in ahead[0]})
+                        inputs = ahead[1]
+                        i += 1
+                    else:  # run it again, in order, on this stage's outputs
+                        self._missed[(i - 1, stage)] = self._tries
+            previous = outputs
             if self.report_stages:
                 yield StageDone(stage, outputs)
             if not plan.feedback:  # nothing to iterate: a feed-forward chain is exact in one stage

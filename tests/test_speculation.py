@@ -1,0 +1,122 @@
+"""Speculative levels of the distributed method (``speculate = true``): a level runs beside the one before it on
+that one's previous-stage outputs and is kept only when those come back bit for bit the same, so the results are
+the in-order ones to the bit, in fewer round trips when a subsim stops moving at double precision, and in the same
+round trips (a few requests more, bounded) when nothing does.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cosim.coupler.convergence import Tolerance
+from cosim.coupler.couplings import Coupling
+from cosim.coupler.plan import Plan
+from cosim.coupler.relaxation import RETRY_MISSED, Commit, Done, Relaxation, Run, Settings
+from cosim.runner import run_scenario
+from cosim.scenario import ScenarioError, load, parse
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def integrate(y0: float, times: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """y' = u by the trapezoid rule: a deterministic stand-in for a subsim."""
+    steps = np.diff(times) * (u[1:] + u[:-1]) / 2.0
+    return y0 + np.concatenate(([0.0], np.cumsum(steps)))
+
+
+def line(feedback_gain: float) -> Plan:
+    """a -> b -> c in order, c fed back to a with ``feedback_gain``: three levels of one subsim."""
+    couplings = [Coupling.make("b.u", "a.y"), Coupling.make("c.u", "b.y"),
+                 Coupling.make("a.u", "c.y", "gain", {"k": feedback_gain})]
+    plan = Plan.build({n: {"u": 1} for n in "abc"}, {n: {"y": 1} for n in "abc"}, couplings, "distributed",
+                      order=["a", "b", "c"])
+    assert plan.levels == (("a",), ("b",), ("c",))
+    return plan
+
+
+def drive(plan: Plan, speculate: bool, t_stop: float) -> tuple[list[tuple[int, int, tuple[str, ...]]], list[dict]]:
+    """Every Run as (interval, stage, subsims), and every committed interval's outputs."""
+    s = Settings(method="distributed", interval=0.25, samples=5, first_guess="zero", tol=Tolerance(1e-13, 1e-15),
+                 speculate=speculate)
+    steps = Relaxation(plan, s).run(0.0, t_stop)
+    action, runs, commits = steps.send(None), [], []
+    while not isinstance(action, Done):
+        if isinstance(action, Run):
+            runs.append((len(commits), action.stage, tuple(action.inputs)))
+            reply = {n: {"y": integrate(1.0 + "abc".index(n), action.times, ins["u"][:, 0])[:, None]}
+                     for n, ins in action.inputs.items()}
+            action = steps.send(reply)
+        else:
+            if isinstance(action, Commit):
+                commits.append(action.interval.outputs)
+            action = steps.send(None)
+    return runs, commits
+
+
+def same_bits(x: list[dict], y: list[dict]) -> bool:
+    return len(x) == len(y) and all(a[n]["y"].tobytes() == b[n]["y"].tobytes() for a, b in zip(x, y) for n in "abc")
+
+
+def test_a_subsim_that_stops_moving_lets_the_next_level_run_beside_it_with_the_same_bits() -> None:
+    plan = line(1e-30)  # a's input is far below a's rounding: a repeats its output bit for bit at every stage
+    in_order, expected = drive(plan, False, 1.0)
+    speculated, commits = drive(plan, True, 1.0)
+    assert same_bits(commits, expected) and len(commits) == 4
+    assert all(len(names) == 1 for _, _, names in in_order)
+    # stage 0 in order (nothing to speculate on yet), then a and b together in every later stage
+    assert [names for _, stage, names in speculated if stage == 0] == [("a",), ("b",), ("c",)] * 4
+    later = [names for _, stage, names in speculated if stage > 0]
+    assert later and later == [("a", "b"), ("c",)] * (len(later) // 2)
+    assert len(in_order) - len(speculated) == sum(1 for _, stage, _ in in_order if stage > 0) // 3
+
+
+def test_when_nothing_repeats_the_results_and_round_trips_are_the_in_order_ones() -> None:
+    plan = line(-1.0)  # tightly coupled: every subsim moves at every stage
+    in_order, expected = drive(plan, False, 20.0)
+    speculated, commits = drive(plan, True, 20.0)
+    assert same_bits(commits, expected) and len(commits) == 80
+    assert len(speculated) == len(in_order)  # every miss runs its level again: no round trip gained or lost
+    level = {"a": 0, "b": 1, "c": 2}
+    attempts: dict[tuple[int, int], list[int]] = {}
+    for interval, stage, names in speculated:
+        if len(names) == 2:
+            attempts.setdefault((level[names[0]], stage), []).append(interval)
+    assert attempts
+    for tried in attempts.values():  # a (level, stage) that missed is tried again RETRY_MISSED intervals later
+        assert tried[0] == 0 and all(b - a == RETRY_MISSED for a, b in zip(tried, tried[1:]))
+    requests = sum(len(names) for _, _, names in speculated)
+    assert requests - sum(len(names) for _, _, names in in_order) == sum(map(len, attempts.values()))
+
+
+def test_speculate_must_be_a_boolean() -> None:
+    with pytest.raises(ValueError, match="speculate must be true or false"):
+        Settings(method="distributed", speculate="yes")  # type: ignore[arg-type]
+    raw = tomllib.loads((ROOT / "scenarios/oscillator.toml").read_text())
+    raw.setdefault("coupling", {}).setdefault("distributed", {})["speculate"] = "yes"
+    with pytest.raises(ScenarioError, match="speculate must be true or false"):
+        parse(raw, ROOT / "scenarios/oscillator.toml")
+
+
+def test_the_paper_satellite_runs_8_round_trips_an_interval_instead_of_9_with_the_same_results(tmp_path: Path) -> None:
+    scenario = load(ROOT / "scenarios/satellite/case1.toml")
+    assert scenario.settings["distributed"].speculate  # the paper scenarios speculate
+    off = dataclasses.replace(scenario, settings={**scenario.settings, "distributed": dataclasses.replace(
+        scenario.settings["distributed"], speculate=False)})
+    reports = {}
+    for name, s in (("on", scenario), ("off", off)):
+        reports[name] = run_scenario(s, "distributed", stop=40.0, output=tmp_path / f"{name}.csv", inprocess=True,
+                                     progress=False, log=lambda *a, **k: None)
+    on, off_ = reports["on"].summary, reports["off"].summary
+    assert (tmp_path / "on.csv").read_bytes() == (tmp_path / "off.csv").read_bytes()
+    assert on.intervals == off_.intervals == 100 and on.stages == off_.stages == {3: 100}
+    assert off_.round_trips == 9 * 100
+    # stage 2 runs orbit and attitude together (orbit's R repeats bit for bit); stage 1 misses (stage 0 ran on
+    # zero aero force), and is tried again every RETRY_MISSED intervals
+    assert 8 * 100 <= on.round_trips <= 8 * 100 + RETRY_MISSED  # a miss at stage 2 waits RETRY_MISSED intervals
+    # a miss costs one request: at most one per (level with a successor, stage 1 or 2) every RETRY_MISSED intervals
+    assert 0 < on.requests - off_.requests <= 2 * 2 * -(-100 // RETRY_MISSED)
