@@ -374,9 +374,12 @@ class Relaxation:
             return None
         seen = {**outputs, **{name: previous[name] for name in levels[i]}}
         ahead = dict(inputs)
-        for name in levels[i + 1]:
-            for k, c, w in self._forward_into[name]:
-                ahead[k] = c.evaluate(seen, w, n)
+        try:
+            for name in levels[i + 1]:
+                for k, c, w in self._forward_into[name]:
+                    ahead[k] = c.evaluate(seen, w, n)
+        except ValueError:  # a mix of stages no in-order run would see: not worth an error, run in order instead
+            return None
         return levels[i + 1], ahead
 
     def _repeated(self, i: int, outputs: Outputs, previous: Outputs) -> bool:
