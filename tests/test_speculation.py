@@ -44,17 +44,18 @@ def drive(plan: Plan, speculate: bool, t_stop: float) -> tuple[list[tuple[int, i
     s = Settings(method="distributed", interval=0.25, samples=5, first_guess="zero", tol=Tolerance(1e-13, 1e-15),
                  speculate=speculate)
     steps = Relaxation(plan, s).run(0.0, t_stop)
-    action, runs, commits = steps.send(None), [], []
+    runs: list[tuple[int, int, tuple[str, ...]]] = []
+    commits: list[dict] = []
+    action = steps.send(None)
     while not isinstance(action, Done):
-        if isinstance(action, Run):
+        reply = None
+        if isinstance(action, Run):  # each subsim starts from its own y0 = 1, 2, 3 in every interval
             runs.append((len(commits), action.stage, tuple(action.inputs)))
             reply = {n: {"y": integrate(1.0 + "abc".index(n), action.times, ins["u"][:, 0])[:, None]}
                      for n, ins in action.inputs.items()}
-            action = steps.send(reply)
-        else:
-            if isinstance(action, Commit):
-                commits.append(action.interval.outputs)
-            action = steps.send(None)
+        elif isinstance(action, Commit):
+            commits.append(action.interval.outputs)
+        action = steps.send(reply)
     return runs, commits
 
 
