@@ -38,37 +38,15 @@ def _pair(a: np.ndarray, b: np.ndarray, what_a: str, what_b: str) -> tuple[np.nd
     return a, b
 
 
-# rotation321's entries, in the rows S1 S2 S3 C1 C2 C3 (_S1.._C3) of [sin phi; cos phi], are of four forms:
-# a b (A00 = C2 C3, A01 = C2 S3, A12 = S1 C2, A22 = C1 C2); -S2 (A02); (x S2) y - u v (A10 = S1 S2 C3 - C1 S3,
-# A21 = C1 S2 S3 - S1 C3); (x S2) y + u v (A11 = S1 S2 S3 + C1 C3, A20 = C1 S2 C3 + S1 S3)
-_S1, _S2, _S3, _C1, _C2, _C3 = range(6)
-_FACTORS = np.array([_C2, _C2, _S1, _C1, _C1, _S1, _C1, _S1,  # a of A00 A01 A12 A22, u of A10 A21 A11 A20
-                     _C3, _S3, _C2, _C2, _S3, _C3, _C3, _S3,  # b, v
-                     _S1, _C1, _S1, _C1, _S2, _S2, _S2, _S2, _C3, _S3, _S3, _C3])  # x, S2, y of A10 A21 A11 A20
-_ENTRIES = np.array([0, 1, 4, 5, 7, 2, 8, 6, 3])  # A00 A01 A12 A22 A02 A10 A21 A11 A20 -> A row-major
-
-
-def _dcm321(phi: np.ndarray) -> np.ndarray:
-    """dcm321_batch(phi) of an (n, 3) array bit for bit, in fewer array operations: rotation321's products, sums
-    and differences, operands in the same order, for several entries of A at once (sines and cosines of the same
-    array); C-ordered as dcm321_batch's, so that einsum sums the same way."""
-    sc = np.concatenate((np.sin(phi).T, np.cos(phi).T))
-    f = sc.take(_FACTORS, axis=0)
-    ab_uv = f[0:8] * f[8:16]
-    xy = f[16:20] * f[20:24] * f[24:28]
-    a = np.concatenate((ab_uv[:4], -sc[_S2:_S2 + 1], xy[:2] - ab_uv[4:6], xy[2:] + ab_uv[6:]))
-    return a.T.take(_ENTRIES, axis=1).reshape(-1, 3, 3)
-
-
 _last_dcm: tuple[bytes, np.ndarray] = (b"", np.empty((0, 3, 3)))
 
 
 def _dcm(phi: np.ndarray) -> np.ndarray:
-    """_dcm321(phi), remembered for the last phi: a stage rotates three signals by the same angles."""
+    """dcm321_batch(phi), remembered for the last phi: a stage rotates three signals by the same angles."""
     global _last_dcm
     key = phi.tobytes()
     if key != _last_dcm[0]:
-        _last_dcm = (key, _dcm321(phi))
+        _last_dcm = (key, dcm321_batch(phi))
     return _last_dcm[1]
 
 
