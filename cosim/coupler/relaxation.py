@@ -11,8 +11,6 @@ beside the level before it, on that level's outputs of the previous stage; it is
 back bit for bit the same (its inputs were then exactly the in-order ones: the same results, one round trip
 less), else run again in order.
 Both check from stage 1 on, as the paper's listings do (stage 0 runs on the first guess).
-A subsim asked again, within one try of an interval, on the very inputs of its latest run is answered from that
-run without a request (``advance`` is pure, so a request could only return the same bits).
 
 The machine does no I/O and reads no clock. It emits actions and takes results (the h11 pattern)::
 
@@ -55,7 +53,6 @@ RETRY_MISSED = 32  # interval tries after a speculation missed before it is trie
 
 Outputs = dict[str, dict[str, np.ndarray]]  # subsim -> port -> samples (n, size)
 Evaluations = tuple[tuple[str, Coupling, int], ...]  # couplings with their targets' "subsim.port" and width
-Latest = dict[str, tuple[tuple[bytes, ...], dict[str, np.ndarray]]]  # subsim -> (its last run's inputs, outputs)
 
 
 @dataclass(frozen=True)
@@ -244,30 +241,6 @@ class Relaxation:
         self.requests += len(inputs)
         return Run(stage, times, inputs)
 
-    def _ask(self, stage: int, times: np.ndarray, runs: dict[str, dict[str, np.ndarray]],
-             latest: Latest) -> Generator[Action, Outputs | None, Outputs]:
-        """The outputs of ``runs``. A subsim asked again, in this try of the interval, on the very inputs of its
-        latest run answers from that run without a request: ``advance`` is pure (the contract), so the same
-        committed state, times and inputs give the same bits, and its trial is already that run's.
-        ``latest``: subsim -> (its latest run's inputs as bytes, that run's outputs), kept by the caller per try."""
-        got: Outputs = {}
-        ask: dict[str, dict[str, np.ndarray]] = {}
-        keys: dict[str, tuple[bytes, ...]] = {}
-        for name, ins in runs.items():
-            key = tuple(v.tobytes() for v in ins.values())
-            seen = latest.get(name)
-            if seen is not None and seen[0] == key:
-                got[name] = seen[1]
-            else:
-                ask[name], keys[name] = ins, key
-        if ask:
-            answered = yield self._action(stage, times, ask)
-            assert answered is not None
-            for name, key in keys.items():
-                got[name] = answered[name]
-                latest[name] = (key, answered[name])
-        return got
-
     # --- the action streams -----------------------------------------------------------------------
 
     def run(self, t_start: float, t_stop: float) -> Steps:
@@ -426,10 +399,8 @@ class Relaxation:
         inputs = self._guess(times, self._all)
         history: dict[str, list[float]] = {}
         previous: dict[str, np.ndarray] | None = None
-        latest: Latest = {}
         for stage in range(s.max_stages):
-            runs = {name: self._inputs_of(name, inputs, n) for name in plan.names}
-            outputs = yield from self._ask(stage, times, runs, latest)
+            outputs = yield self._action(stage, times, {name: self._inputs_of(name, inputs, n) for name in plan.names})
             if self.report_stages:
                 yield StageDone(stage, outputs)
             flat = {f"{name}.{p}": v for name, ports in outputs.items() for p, v in ports.items()}
@@ -447,7 +418,6 @@ class Relaxation:
         fed_back = self._guess(times, self._feedback)
         history: dict[str, list[float]] = {}
         previous: Outputs | None = None  # the previous stage's outputs
-        latest: Latest = {}
         self._tries += 1
         for stage in range(s.max_stages):
             inputs = dict(fed_back)
@@ -462,7 +432,7 @@ class Relaxation:
                 ahead = self._ahead(i, stage, previous, outputs, inputs, n)
                 if ahead is not None:
                     runs.update({name: self._inputs_of(name, ahead[1], n) for name in ahead[0]})
-                got = yield from self._ask(stage, times, runs, latest)
+                got = yield self._action(stage, times, runs)
                 outputs.update({name: got[name] for name in level})
                 i += 1
                 if ahead is not None:
