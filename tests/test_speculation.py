@@ -30,13 +30,11 @@ def integrate(y0: float, times: np.ndarray, u: np.ndarray) -> np.ndarray:
 
 
 def line(feedback_gain: float) -> Plan:
-    """a -> b -> c in order, c fed back to a with ``feedback_gain`` and to b's second input: three levels of one
-    subsim. (The feedback into b keeps b's inputs moving when a's outputs do not; else b would be answered from its
-    latest run, with no request at all.)"""
-    couplings = [Coupling.make("b.u", "a.y"), Coupling.make("b.v", "c.y"), Coupling.make("c.u", "b.y"),
+    """a -> b -> c in order, c fed back to a with ``feedback_gain``: three levels of one subsim."""
+    couplings = [Coupling.make("b.u", "a.y"), Coupling.make("c.u", "b.y"),
                  Coupling.make("a.u", "c.y", "gain", {"k": feedback_gain})]
-    plan = Plan.build({"a": {"u": 1}, "b": {"u": 1, "v": 1}, "c": {"u": 1}}, {n: {"y": 1} for n in "abc"}, couplings,
-                      "distributed", order=["a", "b", "c"])
+    plan = Plan.build({n: {"u": 1} for n in "abc"}, {n: {"y": 1} for n in "abc"}, couplings, "distributed",
+                      order=["a", "b", "c"])
     assert plan.levels == (("a",), ("b",), ("c",))
     return plan
 
@@ -52,9 +50,9 @@ def drive(plan: Plan, speculate: bool, t_stop: float,
     action = steps.send(None)
     while not isinstance(action, Done):
         reply = None
-        if isinstance(action, Run):  # y' = the sum of the inputs, from y0 = 1, 2, 3 in every interval
+        if isinstance(action, Run):  # each subsim starts from its own y0 = 1, 2, 3 in every interval
             runs.append((len(commits), action.stage, tuple(action.inputs)))
-            reply = {n: {"y": integrate(1.0 + names.index(n), action.times, sum(ins.values())[:, 0])[:, None]}
+            reply = {n: {"y": integrate(1.0 + names.index(n), action.times, ins["u"][:, 0])[:, None]}
                      for n, ins in action.inputs.items()}
         elif isinstance(action, Commit):
             commits.append(action.interval.outputs)
