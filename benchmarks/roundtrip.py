@@ -9,14 +9,20 @@ request is repeated. Four ways, interleaved in rounds so that load drifts hit al
   (a) remote   RemoteHandle -> Zenoh -> a spawned ``python -m subsims.integrator`` (cosim.launch.Bus)
   (b) inproc   InProcessHandle: the same Runtime called directly
   (c) bare     session.get of the same request bytes -> Zenoh -> a spawned bare queryable that
-               answers with a fixed payload of the real reply's size (same session settings, same
-               FifoChannel-on-the-main-thread serving loop as cosim's CommandServer)
+               answers with a fixed payload of the real reply's size (same session settings; a
+               FifoChannel read on the main thread: answering on zenoh's callback thread instead, as
+               cosim's CommandServer does, measured the same, 51.4 vs 52.1 us and 163.7 vs 162.6 us)
   (d) status   RemoteHandle.status() to the same process: the framework's fixed cost per request
                (envelope, codec, dispatch) without the model's work
+  (e) bare+work  as (c), but the responder first runs the subsim's own ``answer()`` on the request (decode,
+               run the integrator, encode; nothing sealed) on a Runtime of its own, then sends the fixed
+               reply: what that work costs on the wire, where it runs after a wait, with cold caches
 
-Then the framework overhead ratio (a)/(c); (a) once more against an integrator process that times
-its own ``answer()`` (server work vs transport); and where the framework's time goes: the CPU time of
-each stage of the request path, in this process. Prints figures; asserts nothing.
+Then the framework overhead ratio (a)/(c), split at (e): (e)/(c) is the subsim's own work in its place,
+(a)/(e) the rest (client side, seals, the serving thread's bookkeeping); (a) once more against an
+integrator process that times its own ``answer()`` (server work vs transport); and where the
+framework's time goes: the CPU time of each stage of the request path, in this process. Prints
+figures; asserts nothing.
 """
 
 from __future__ import annotations
@@ -56,27 +62,31 @@ STOP = b"stop"
 # --- the bare Zenoh responder (runs in its own process) ----------------------------------------------
 
 
-def bare_key(run: str) -> str:
-    return f"cosim/{run}/bare/rpc"
+def bare_key(run: str, name: str = "bare") -> str:
+    return f"cosim/{run}/{name}/rpc"
 
 
-def serve_bare(endpoint: str, run: str, reply_size: int) -> int:
-    """Answer every query on the bare key with ``reply_size`` fixed bytes until told to stop."""
+def serve_bare(endpoint: str, run: str, reply_size: int, name: str = "bare", work: bool = False) -> int:
+    """Answer every query on the bare key with ``reply_size`` fixed bytes until told to stop. With ``work``,
+    first run the integrator subsim's ``answer()`` on the query's payload (an unsealed run_interval)."""
 
     def stop(signum: int, frame: object) -> None:
         raise SystemExit(0)
 
     signal.signal(signal.SIGTERM, stop)
     reply = bytes(range(256)) * (reply_size // 256) + bytes(reply_size % 256)
+    runtime = Runtime(Integrator(), "integ") if work else None
+    if runtime is not None:
+        runtime.configure(PARAMS)
     security = ClientSecurity.from_env()  # the run's login (the bare responder seals nothing)
     with zenoh.open(client_config(endpoint, 10.0, security=security)) as session:
-        queryable = session.declare_queryable(bare_key(run), zenoh.handlers.FifoChannel(64))
+        queryable = session.declare_queryable(bare_key(run, name), zenoh.handlers.FifoChannel(64))
         # exit with the coordinator, as real subsims do
         watch = session.liveliness().declare_subscriber(
             coordinator_alive_key(run),
             lambda s: os.kill(os.getpid(), signal.SIGTERM) if s.kind == zenoh.SampleKind.DELETE else None,
         )
-        token = session.liveliness().declare_token(f"cosim/{run}/bare/alive")
+        token = session.liveliness().declare_token(f"cosim/{run}/{name}/alive")
         try:
             while True:
                 query = queryable.recv()
@@ -85,6 +95,8 @@ def serve_bare(endpoint: str, run: str, reply_size: int) -> int:
                     if payload == STOP:
                         query.reply(query.key_expr, b"bye")
                         return 0
+                    if runtime is not None and payload != b"ping":
+                        answer(runtime, payload)
                     query.reply(query.key_expr, reply)
         finally:
             token.undeclare()
@@ -152,11 +164,13 @@ def in_situ(bus: Bus, warmup: int, count: int) -> tuple[list[float], list[float]
 class BareClient:
     """The coordinator half of (c): exactly what RemoteHandle does, minus encoding and decoding."""
 
-    def __init__(self, bus: Bus, reply_size: int) -> None:
-        self.session, self.key = bus.session, bare_key(bus.run)
+    def __init__(self, bus: Bus, reply_size: int, work: bool = False) -> None:
+        name = "bare-work" if work else "bare"
+        self.session, self.key = bus.session, bare_key(bus.run, name)
         self.popen = subprocess.Popen(
-            [sys.executable, str(Path(__file__).resolve()), "--bare-server", bus.endpoint, bus.run, str(reply_size)],
-            env={**os.environ, **bus.subsim_env("bare")},
+            [sys.executable, str(Path(__file__).resolve()), "--bare-server", bus.endpoint, bus.run, str(reply_size),
+             name, "work" if work else "fixed"],
+            env={**os.environ, **bus.subsim_env(name)},
         )
         deadline = time.monotonic() + 20.0
         while not self._answers(b"ping"):  # declarations propagate asynchronously
@@ -213,6 +227,13 @@ def per_call(fn: Callable[[], object], batch: int = 200, batches: int = 15) -> f
     return statistics.median(times)
 
 
+def answer_cpu(request: bytes) -> float:
+    """CPU time of the subsim's ``answer()`` on ``request``, repeated in this process (warm caches), in us."""
+    rt = Runtime(Integrator(), "integ")
+    rt.configure(PARAMS)
+    return per_call(lambda: answer(rt, request))
+
+
 def pct(xs: list[float], q: float) -> float:
     return float(np.percentile(xs, q))
 
@@ -262,12 +283,13 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--samples", type=int, default=1000, help="timed calls per way (>= 500)")
     p.add_argument("--warmup", type=int, default=200, help="untimed calls per way first")
     p.add_argument("--rounds", type=int, default=10, help="interleaved rounds the samples are split into")
-    p.add_argument("--bare-server", nargs=3, metavar=("ENDPOINT", "RUN", "REPLY_SIZE"), help=argparse.SUPPRESS)
+    p.add_argument("--bare-server", nargs=5, metavar=("ENDPOINT", "RUN", "REPLY_SIZE", "NAME", "MODE"),
+                   help=argparse.SUPPRESS)
     p.add_argument("--timed-subsim", nargs=3, metavar=("ENDPOINT", "RUN", "NAME"), help=argparse.SUPPRESS)
     a = p.parse_args(argv)
     if a.bare_server:
-        endpoint, run, size = a.bare_server
-        return serve_bare(endpoint, run, int(size))
+        endpoint, run, size, name, mode = a.bare_server
+        return serve_bare(endpoint, run, int(size), name, mode == "work")
     if a.timed_subsim:
         return serve_timed(*a.timed_subsim)
 
@@ -282,16 +304,18 @@ def main(argv: list[str] | None = None) -> int:
         inproc = InProcessHandle(Integrator(), "integ")
         inproc.configure(PARAMS)
         bare = BareClient(bus, len(reply))
+        bare_work = BareClient(bus, len(reply), work=True)
         try:
             # the three ways must agree before their times mean anything
             r_remote, r_inproc = remote.run_interval(TIMES, INPUTS), inproc.run_interval(TIMES, INPUTS)
             assert r_remote.outputs["y"].tobytes() == r_inproc.outputs["y"].tobytes()
-            assert len(bare.call(request)) == len(reply)
+            assert len(bare.call(request)) == len(bare_work.call(request)) == len(reply)
             ways: dict[str, Callable[[], object]] = {
                 "(a) remote handle, spawned process": lambda: remote.run_interval(TIMES, INPUTS),
                 "(b) in-process handle": lambda: inproc.run_interval(TIMES, INPUTS),
                 "(c) bare zenoh get/reply, same bytes": lambda: bare.call(request),
                 "(d) remote handle, status (no model work)": remote.status,
+                "(e) bare, responder runs answer() first": lambda: bare_work.call(request),
             }
             for fn in ways.values():
                 sample(fn, a.warmup)
@@ -302,6 +326,7 @@ def main(argv: list[str] | None = None) -> int:
                     samples[name] += sample(fn, per_round)
         finally:
             bare.close()
+            bare_work.close()
         rtt, srv_wall, srv_cpu = in_situ(bus, a.warmup, a.samples)
 
     load = os.getloadavg()
@@ -315,7 +340,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"|{'-' * 44}|-------------|----------|---------|")
     for name, xs in samples.items():
         print(f"| {name:<42} | {pct(xs, 50):11.1f} | {pct(xs, 90):8.1f} | {len(xs):7d} |")
-    ra, _, rc, _ = samples.values()
+    ra, _, rc, _, re = samples.values()
     med = pct(ra, 50) / pct(rc, 50)
     print()
     print(
@@ -323,6 +348,11 @@ def main(argv: list[str] | None = None) -> int:
         f"(target <= 1.50x: {'met' if med <= 1.5 else 'NOT met'})"
     )
     print(f"framework time per call, median (a) - (c): {pct(ra, 50) - pct(rc, 50):.1f} us")
+    print(
+        f"  of which the subsim's answer() where it runs, (e)/(c): {pct(re, 50) / pct(rc, 50):.2f}x "
+        f"(+{pct(re, 50) - pct(rc, 50):.1f} us, for {answer_cpu(request):.1f} us of CPU when repeated in one process); "
+        f"the rest, (a)/(e): {pct(ra, 50) / pct(re, 50):.2f}x"
+    )
     print()
     print("(a) again, against an integrator process that times answer() itself (medians, us):")
     print(
