@@ -22,8 +22,11 @@ Exit code 1 if any subsim crashed or changed.
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import json
+import re
 import sys
+import tempfile
 import time
 from collections import Counter, deque
 from pathlib import Path
@@ -41,8 +44,9 @@ ROOT = Path(__file__).resolve().parents[1]
 EXTRA = {"subsims.integrator.subsim:Integrator": {}, "subsims.double_integrator.subsim:DoubleIntegrator": {}}
 
 
-def shipped() -> dict[str, dict]:
-    """model -> params of the first scenario that uses it (plus the two test subsims)."""
+def shipped(build_dir: Path) -> dict[str, dict]:
+    """model -> params of the first scenario that uses it (plus the two test subsims). An FMU the scenario names
+    that is not built yet (``scenarios/fmu/mass2.fmu``) is built into ``build_dir``, as the tests build theirs."""
     found: dict[str, dict] = {}
     for path in sorted(ROOT.glob("scenarios/**/*.toml")):
         try:
@@ -51,8 +55,20 @@ def shipped() -> dict[str, dict]:
             continue
         for spec in scenario.subsims.values():
             if spec.model and spec.model not in found:
-                found[spec.model] = dict(spec.params)
+                found[spec.model] = {k: _built(v, build_dir) for k, v in spec.params.items()}
     return {**found, **{m: p for m, p in EXTRA.items() if m not in found}}
+
+
+def _built(value: object, build_dir: Path) -> object:
+    """``value``, or the path of the mass FMU it names built into ``build_dir`` when that file is missing."""
+    match = re.fullmatch(r".*mass([23])\.fmu", value) if isinstance(value, str) else None
+    if match is None or Path(value).is_file():
+        return value
+    spec = importlib.util.spec_from_file_location("build_mass", ROOT / "scenarios" / "fmu" / "build_mass.py")
+    assert spec is not None and spec.loader is not None
+    build_mass = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(build_mass)
+    return str(build_mass.build_mass_fmu(build_dir, int(match.group(1))))
 
 
 def array(shape: list, data: bytes) -> dict:
@@ -257,20 +273,22 @@ def main() -> int:
     args = p.parse_args()
     if args.oversized and not args.json:
         print(oversized(args.oversized), flush=True)
-    models = {m: prm for m, prm in shipped().items() if not args.only or any(s in m for s in args.only)}
-    bad = 0
-    for model, params in models.items():
-        row = flood(model, params, args.count, args.window, args.seed)
-        bad += row["crashes"] + row["state_changes"]
-        for k in ("bad_request", "decode"):
-            row["replies"].setdefault(k, 0)
-        if args.json:
-            print(json.dumps(row), flush=True)
-        else:
-            codes = ", ".join(f"{k} {v}" for k, v in sorted(row["replies"].items()))
-            print(f"{model}: {row['sent']} sent in {row['seconds']} s; crashes {row['crashes']}, committed-state "
-                  f"changes {row['state_changes']}; replies: {codes}; reached the runtime: "
-                  f"{row['served_by_runtime']}", flush=True)
+    with tempfile.TemporaryDirectory(prefix="cosim-flood-") as tmp:
+        build_dir = Path(tmp)
+        models = {m: prm for m, prm in shipped(build_dir).items() if not args.only or any(s in m for s in args.only)}
+        bad = 0
+        for model, params in models.items():
+            row = flood(model, params, args.count, args.window, args.seed)
+            bad += row["crashes"] + row["state_changes"]
+            for k in ("bad_request", "decode"):
+                row["replies"].setdefault(k, 0)
+            if args.json:
+                print(json.dumps(row), flush=True)
+            else:
+                codes = ", ".join(f"{k} {v}" for k, v in sorted(row["replies"].items()))
+                print(f"{model}: {row['sent']} sent in {row['seconds']} s; crashes {row['crashes']}, committed-state "
+                      f"changes {row['state_changes']}; replies: {codes}; reached the runtime: "
+                      f"{row['served_by_runtime']}", flush=True)
     return 1 if bad else 0
 
 
