@@ -4,7 +4,7 @@
 
 The request: an integrator subsim of size 6 (configured with y0 = zeros), interval [0, 0.4] with 5
 samples, a 5x6 input segment, linear interpolation. ``run_interval`` commits nothing, so the same
-request is repeated. Four ways, interleaved in rounds so that load drifts hit all of them alike:
+request is repeated. Five ways, interleaved in rounds so that load drifts hit all of them alike:
 
   (a) remote   RemoteHandle -> Zenoh -> a spawned ``python -m subsims.integrator`` (cosim.launch.Bus)
   (b) inproc   InProcessHandle: the same Runtime called directly
@@ -43,7 +43,7 @@ import zenoh
 from cosim.handles import InProcessHandle
 from cosim.launch import Bus, terminate
 from cosim.protocol.keys import coordinator_alive_key
-from cosim.protocol.messages import decode_reply, decode_request, encode_request, encode_result
+from cosim.protocol.messages import ErrorInfo, decode_reply, decode_request, encode_request, encode_result
 from cosim.protocol.security import ClientSecurity
 from cosim.protocol.service import answer
 from cosim.protocol.transport.session import client_config
@@ -78,6 +78,7 @@ def serve_bare(endpoint: str, run: str, reply_size: int, name: str = "bare", wor
     runtime = Runtime(Integrator(), "integ") if work else None
     if runtime is not None:
         runtime.configure(PARAMS)
+    checked = None
     security = ClientSecurity.from_env()  # the run's login (the bare responder seals nothing)
     with zenoh.open(client_config(endpoint, 10.0, security=security)) as session:
         queryable = session.declare_queryable(bare_key(run, name), zenoh.handlers.FifoChannel(64))
@@ -96,7 +97,11 @@ def serve_bare(endpoint: str, run: str, reply_size: int, name: str = "bare", wor
                         query.reply(query.key_expr, b"bye")
                         return 0
                     if runtime is not None and payload != b"ping":
-                        answer(runtime, payload)
+                        result = answer(runtime, payload)
+                        if checked is None:  # once: the work done must be the model's run, not an error reply
+                            checked = decode_reply("run_interval", result)
+                            if isinstance(checked, ErrorInfo):
+                                raise SystemExit(f"bare responder: answer() refused the request: {checked.message}")
                     query.reply(query.key_expr, reply)
         finally:
             token.undeclare()
@@ -304,9 +309,10 @@ def main(argv: list[str] | None = None) -> int:
         inproc = InProcessHandle(Integrator(), "integ")
         inproc.configure(PARAMS)
         bare = BareClient(bus, len(reply))
-        bare_work = BareClient(bus, len(reply), work=True)
+        bare_work = None
         try:
-            # the three ways must agree before their times mean anything
+            bare_work = BareClient(bus, len(reply), work=True)
+            # the ways must agree before their times mean anything
             r_remote, r_inproc = remote.run_interval(TIMES, INPUTS), inproc.run_interval(TIMES, INPUTS)
             assert r_remote.outputs["y"].tobytes() == r_inproc.outputs["y"].tobytes()
             assert len(bare.call(request)) == len(bare_work.call(request)) == len(reply)
@@ -326,7 +332,8 @@ def main(argv: list[str] | None = None) -> int:
                     samples[name] += sample(fn, per_round)
         finally:
             bare.close()
-            bare_work.close()
+            if bare_work is not None:
+                bare_work.close()
         rtt, srv_wall, srv_cpu = in_situ(bus, a.warmup, a.samples)
 
     load = os.getloadavg()
