@@ -4,7 +4,7 @@
 
 The request: an integrator subsim of size 6 (configured with y0 = zeros), interval [0, 0.4] with 5
 samples, a 5x6 input segment, linear interpolation. ``run_interval`` commits nothing, so the same
-request is repeated. Five ways, interleaved in rounds so that load drifts hit all of them alike:
+request is repeated. Six ways, interleaved in rounds so that load drifts hit all of them alike:
 
   (a) remote   RemoteHandle -> Zenoh -> a spawned ``python -m subsims.integrator`` (cosim.launch.Bus)
   (b) inproc   InProcessHandle: the same Runtime called directly
@@ -17,9 +17,12 @@ request is repeated. Five ways, interleaved in rounds so that load drifts hit al
   (e) bare+work  as (c), but the responder first runs the subsim's own ``answer()`` on the request (decode,
                run the integrator, encode; nothing sealed) on a Runtime of its own, then sends the fixed
                reply: what that work costs on the wire, where it runs after a wait, with cold caches
+  (f) bare+loop  as (e), but the work is a pure-Python loop of additions that takes, repeated in one
+               process, as long as that ``answer()``: the same CPU with a small code footprint
 
 Then the framework overhead ratio (a)/(c), split at (e): (e)/(c) is the subsim's own work in its place,
-(a)/(e) the rest (client side, seals, the serving thread's bookkeeping); (a) once more against an
+(a)/(e) the rest (client side, seals, the serving thread's bookkeeping); (f)/(c) beside (e)/(c) tells
+whether that work costs by its CPU or by the code it touches (cold after every wait); (a) once more against an
 integrator process that times its own ``answer()`` (server work vs transport); and where the
 framework's time goes: the CPU time of each stage of the request path, in this process. Prints
 figures; asserts nothing.
@@ -66,19 +69,38 @@ def bare_key(run: str, name: str = "bare") -> str:
     return f"cosim/{run}/{name}/rpc"
 
 
-def serve_bare(endpoint: str, run: str, reply_size: int, name: str = "bare", work: bool = False) -> int:
-    """Answer every query on the bare key with ``reply_size`` fixed bytes until told to stop. With ``work``,
-    first run the integrator subsim's ``answer()`` on the query's payload (an unsealed run_interval)."""
+def benchmark_request() -> bytes:
+    return encode_request("run_interval", {"t": TIMES, "inputs": INPUTS, "interp": "linear"})
+
+
+def busy_loop(n: int) -> int:
+    """Pure-Python additions: CPU time with a small code footprint."""
+    x = 0
+    for i in range(n):
+        x += i
+    return x
+
+
+def loop_like_answer() -> int:
+    """Iterations of :func:`busy_loop` that take, repeated in one process, as long as the benchmark's ``answer()``."""
+    return max(1, round(1000 * answer_cpu(benchmark_request()) / per_call(lambda: busy_loop(1000))))
+
+
+def serve_bare(endpoint: str, run: str, reply_size: int, name: str = "bare", mode: str = "fixed") -> int:
+    """Answer every query on the bare key with ``reply_size`` fixed bytes until told to stop. First, with mode
+    ``work``, run the integrator subsim's ``answer()`` on the query's payload (an unsealed run_interval); with
+    ``loop``, :func:`busy_loop` for as long as that takes warm."""
 
     def stop(signum: int, frame: object) -> None:
         raise SystemExit(0)
 
     signal.signal(signal.SIGTERM, stop)
     reply = bytes(range(256)) * (reply_size // 256) + bytes(reply_size % 256)
-    runtime = Runtime(Integrator(), "integ") if work else None
+    runtime = Runtime(Integrator(), "integ") if mode == "work" else None
     if runtime is not None:
         runtime.configure(PARAMS)
     checked = None
+    loop = loop_like_answer() if mode == "loop" else 0
     security = ClientSecurity.from_env()  # the run's login (the bare responder seals nothing)
     with zenoh.open(client_config(endpoint, 10.0, security=security)) as session:
         queryable = session.declare_queryable(bare_key(run, name), zenoh.handlers.FifoChannel(64))
@@ -102,6 +124,8 @@ def serve_bare(endpoint: str, run: str, reply_size: int, name: str = "bare", wor
                             checked = decode_reply("run_interval", result)
                             if isinstance(checked, ErrorInfo):
                                 raise SystemExit(f"bare responder: answer() refused the request: {checked.message}")
+                    if loop and payload != b"ping":
+                        busy_loop(loop)
                     query.reply(query.key_expr, reply)
         finally:
             token.undeclare()
@@ -169,12 +193,12 @@ def in_situ(bus: Bus, warmup: int, count: int) -> tuple[list[float], list[float]
 class BareClient:
     """The coordinator half of (c): exactly what RemoteHandle does, minus encoding and decoding."""
 
-    def __init__(self, bus: Bus, reply_size: int, work: bool = False) -> None:
-        name = "bare-work" if work else "bare"
+    def __init__(self, bus: Bus, reply_size: int, mode: str = "fixed") -> None:
+        name = "bare" if mode == "fixed" else f"bare-{mode}"
         self.session, self.key = bus.session, bare_key(bus.run, name)
         self.popen = subprocess.Popen(
             [sys.executable, str(Path(__file__).resolve()), "--bare-server", bus.endpoint, bus.run, str(reply_size),
-             name, "work" if work else "fixed"],
+             name, mode],
             env={**os.environ, **bus.subsim_env(name)},
         )
         deadline = time.monotonic() + 20.0
@@ -294,11 +318,11 @@ def main(argv: list[str] | None = None) -> int:
     a = p.parse_args(argv)
     if a.bare_server:
         endpoint, run, size, name, mode = a.bare_server
-        return serve_bare(endpoint, run, int(size), name, mode == "work")
+        return serve_bare(endpoint, run, int(size), name, mode)
     if a.timed_subsim:
         return serve_timed(*a.timed_subsim)
 
-    request = encode_request("run_interval", {"t": TIMES, "inputs": INPUTS, "interp": "linear"})
+    request = benchmark_request()
     reference = Runtime(Integrator(), "integ")
     reference.configure(PARAMS)
     reply = answer(reference, request)
@@ -309,19 +333,21 @@ def main(argv: list[str] | None = None) -> int:
         inproc = InProcessHandle(Integrator(), "integ")
         inproc.configure(PARAMS)
         bare = BareClient(bus, len(reply))
-        bare_work = None
+        bare_work = bare_loop = None
         try:
-            bare_work = BareClient(bus, len(reply), work=True)
+            bare_work = BareClient(bus, len(reply), mode="work")
+            bare_loop = BareClient(bus, len(reply), mode="loop")
             # the ways must agree before their times mean anything
             r_remote, r_inproc = remote.run_interval(TIMES, INPUTS), inproc.run_interval(TIMES, INPUTS)
             assert r_remote.outputs["y"].tobytes() == r_inproc.outputs["y"].tobytes()
-            assert len(bare.call(request)) == len(bare_work.call(request)) == len(reply)
+            assert len(bare.call(request)) == len(bare_work.call(request)) == len(bare_loop.call(request)) == len(reply)
             ways: dict[str, Callable[[], object]] = {
                 "(a) remote handle, spawned process": lambda: remote.run_interval(TIMES, INPUTS),
                 "(b) in-process handle": lambda: inproc.run_interval(TIMES, INPUTS),
                 "(c) bare zenoh get/reply, same bytes": lambda: bare.call(request),
                 "(d) remote handle, status (no model work)": remote.status,
                 "(e) bare, responder runs answer() first": lambda: bare_work.call(request),
+                "(f) bare, responder loops as long first": lambda: bare_loop.call(request),
             }
             for fn in ways.values():
                 sample(fn, a.warmup)
@@ -332,8 +358,9 @@ def main(argv: list[str] | None = None) -> int:
                     samples[name] += sample(fn, per_round)
         finally:
             bare.close()
-            if bare_work is not None:
-                bare_work.close()
+            for client in (bare_work, bare_loop):
+                if client is not None:
+                    client.close()
         rtt, srv_wall, srv_cpu = in_situ(bus, a.warmup, a.samples)
 
     load = os.getloadavg()
@@ -347,7 +374,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"|{'-' * 44}|-------------|----------|---------|")
     for name, xs in samples.items():
         print(f"| {name:<42} | {pct(xs, 50):11.1f} | {pct(xs, 90):8.1f} | {len(xs):7d} |")
-    ra, _, rc, _, re = samples.values()
+    ra, _, rc, _, re, rf = samples.values()
     med = pct(ra, 50) / pct(rc, 50)
     print()
     print(
@@ -359,6 +386,10 @@ def main(argv: list[str] | None = None) -> int:
         f"  of which the subsim's answer() where it runs, (e)/(c): {pct(re, 50) / pct(rc, 50):.2f}x "
         f"(+{pct(re, 50) - pct(rc, 50):.1f} us, for {answer_cpu(request):.1f} us of CPU when repeated in one process); "
         f"the rest, (a)/(e): {pct(ra, 50) / pct(re, 50):.2f}x"
+    )
+    print(
+        f"  the same warm CPU in a pure-Python loop (small code footprint), (f)/(c): {pct(rf, 50) / pct(rc, 50):.2f}x "
+        f"(+{pct(rf, 50) - pct(rc, 50):.1f} us, against +{pct(re, 50) - pct(rc, 50):.1f} us for answer())"
     )
     print()
     print("(a) again, against an integrator process that times answer() itself (medians, us):")
