@@ -4,6 +4,7 @@ oversized request is refused before it is decoded (docs/reliability.md, docs/pro
 from __future__ import annotations
 
 import json
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -92,3 +93,19 @@ def test_malformed_requests_never_crash_or_change_a_subsim() -> None:
     for row in rows:
         assert row["sent"] == 2000 and row["crashes"] == 0 and row["state_changes"] == 0, row
         assert row["replies"]["dropped"] > 0 and row["replies"]["bad_request"] + row["replies"]["decode"] > 0, row
+
+
+def test_the_fmu_subsim_survives_the_flood_too() -> None:
+    """The FMU subsim (state vector = the FMU's serialized state, deserialized at every run) under 1,000 hostile
+    requests, bad states among them: the benchmark builds the scenario's mass FMU, as a fresh clone has none."""
+    if shutil.which("gcc") is None or shutil.which("nm") is None:
+        pytest.skip("building the mass FMU needs gcc and nm")
+    cmd = [sys.executable, str(ROOT / "benchmarks" / "flood.py"), "--count", "1000", "--json", "--oversized", "0",
+           "--only", "subsims.fmu:FmuSubsim"]
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=900)
+    assert done.returncode == 0, done.stderr[-2000:]
+    rows = [json.loads(line) for line in done.stdout.splitlines() if line.startswith("{")]
+    assert [row["subsim"] for row in rows] == ["subsims.fmu:FmuSubsim"], done.stdout[-2000:]
+    row = rows[0]
+    assert row["sent"] == 1000 and row["crashes"] == 0 and row["state_changes"] == 0, row
+    assert row["served_by_runtime"] > 0, row  # some requests got past the door and reached the FMU's runtime
