@@ -69,6 +69,13 @@ def bare_key(run: str, name: str = "bare") -> str:
     return f"cosim/{run}/{name}/rpc"
 
 
+def integrator_runtime() -> Runtime:
+    """The benchmark's subsim, in this process: an integrator Runtime configured with ``PARAMS``."""
+    rt = Runtime(Integrator(), "integ")
+    rt.configure(PARAMS)
+    return rt
+
+
 def benchmark_request() -> bytes:
     return encode_request("run_interval", {"t": TIMES, "inputs": INPUTS, "interp": "linear"})
 
@@ -96,9 +103,7 @@ def serve_bare(endpoint: str, run: str, reply_size: int, name: str = "bare", mod
 
     signal.signal(signal.SIGTERM, stop)
     reply = bytes(range(256)) * (reply_size // 256) + bytes(reply_size % 256)
-    runtime = Runtime(Integrator(), "integ") if mode == "work" else None
-    if runtime is not None:
-        runtime.configure(PARAMS)
+    runtime = integrator_runtime() if mode == "work" else None
     checked = None
     loop = loop_like_answer() if mode == "loop" else 0
     security = ClientSecurity.from_env()  # the run's login (the bare responder seals nothing)
@@ -118,13 +123,13 @@ def serve_bare(endpoint: str, run: str, reply_size: int, name: str = "bare", mod
                     if payload == STOP:
                         query.reply(query.key_expr, b"bye")
                         return 0
-                    if runtime is not None and payload != b"ping":
+                    if payload != b"ping" and runtime is not None:
                         result = answer(runtime, payload)
                         if checked is None:  # once: the work done must be the model's run, not an error reply
                             checked = decode_reply("run_interval", result)
                             if isinstance(checked, ErrorInfo):
                                 raise SystemExit(f"bare responder: answer() refused the request: {checked.message}")
-                    if loop and payload != b"ping":
+                    elif payload != b"ping" and loop:
                         busy_loop(loop)
                     query.reply(query.key_expr, reply)
         finally:
@@ -258,8 +263,7 @@ def per_call(fn: Callable[[], object], batch: int = 200, batches: int = 15) -> f
 
 def answer_cpu(request: bytes) -> float:
     """CPU time of the subsim's ``answer()`` on ``request``, repeated in this process (warm caches), in us."""
-    rt = Runtime(Integrator(), "integ")
-    rt.configure(PARAMS)
+    rt = integrator_runtime()
     return per_call(lambda: answer(rt, request))
 
 
@@ -269,8 +273,7 @@ def pct(xs: list[float], q: float) -> float:
 
 def breakdown(request: bytes, reply: bytes) -> list[tuple[str, float]]:
     """Each stage of the framework's request path, timed in this process (microseconds per call)."""
-    rt = Runtime(Integrator(), "integ")
-    rt.configure(PARAMS)
+    rt = integrator_runtime()
     args = decode_request(request).args
     times, inputs = args["t"], args["inputs"]
     u = rt._input_function(times, inputs, "linear")
@@ -323,9 +326,7 @@ def main(argv: list[str] | None = None) -> int:
         return serve_timed(*a.timed_subsim)
 
     request = benchmark_request()
-    reference = Runtime(Integrator(), "integ")
-    reference.configure(PARAMS)
-    reply = answer(reference, request)
+    reply = answer(integrator_runtime(), request)
 
     with Bus.open() as bus:
         remote = bus.spawn("subsims.integrator", "integ", quiet=True).handle
@@ -382,9 +383,11 @@ def main(argv: list[str] | None = None) -> int:
         f"(target <= 1.50x: {'met' if med <= 1.5 else 'NOT met'})"
     )
     print(f"framework time per call, median (a) - (c): {pct(ra, 50) - pct(rc, 50):.1f} us")
+    stages = breakdown(request, reply)
+    us = [x for _, x in stages]
     print(
         f"  of which the subsim's answer() where it runs, (e)/(c): {pct(re, 50) / pct(rc, 50):.2f}x "
-        f"(+{pct(re, 50) - pct(rc, 50):.1f} us, for {answer_cpu(request):.1f} us of CPU when repeated in one process); "
+        f"(+{pct(re, 50) - pct(rc, 50):.1f} us, for {us[10]:.1f} us of CPU when repeated in one process); "
         f"the rest, (a)/(e): {pct(ra, 50) / pct(re, 50):.2f}x"
     )
     print(
@@ -402,10 +405,8 @@ def main(argv: list[str] | None = None) -> int:
     print("where the framework's time goes (CPU time per call in this process, median of batch means):")
     print(f"| {'stage':<64} | us/call |")
     print(f"|{'-' * 66}|---------|")
-    stages = breakdown(request, reply)
-    for name, us in stages:
-        print(f"| {name:<64} | {us:7.1f} |")
-    us = [x for _, x in stages]
+    for name, x in stages:
+        print(f"| {name:<64} | {x:7.1f} |")
     codec = us[0] + us[1] + us[9] + us[11]
     runtime = us[8] - us[4]  # run_interval minus the model's advance: validation, interpolant set-up, checks
     evaluations = us[6]
