@@ -170,6 +170,8 @@ class Coordinator:
         self._recording: Iterator[object] | None = None  # the steps left of the interval being recorded
         self._on_interval: OnInterval | None = None
         self._spare_seen = False  # a run left a core idle: intervals are recorded during such runs
+        # seconds from sending to the reply of each subsim's latest run that was waited for (see _run)
+        self._took: dict[str, float] = {}
 
     @property
     def order(self) -> list[str]:
@@ -316,8 +318,12 @@ class Coordinator:
         deadline = self.deadline.seconds()
         pending: dict[str, Callable[[], IntervalResult]] = {}
         sent = time.perf_counter()
-        for name, inputs in action.inputs.items():
-            handle = self.handles[name]
+        # the slowest first (longest processing time first): with more runs than cores, the one that decides
+        # when the action ends starts at once and the others share what is left (remote case 2-auto, RF-C:
+        # 10 % less wall time than in the plan's order). In process nothing is waited for: the plan's order.
+        took = self._took
+        for name in sorted(action.inputs, key=lambda n: -took.get(n, 0.0)) if took else action.inputs:
+            handle, inputs = self.handles[name], action.inputs[name]
             handle.deadline = deadline
             self._sent[name] = inputs
             pending[name] = _send(handle.start_run_interval, action.times, inputs, interp, commit=name in uncommitted)
@@ -333,7 +339,7 @@ class Coordinator:
             except BaseException as exc:  # raised once every request has answered: none is left in flight
                 recording = exc
         try:
-            results = self._gather(pending, replace=True)
+            results = self._gather(pending, replace=True, sent=sent)
         except _Replaced as replaced:  # who answered has committed what rode on the request
             uncommitted.difference_update(replaced.answered)
             if recording is not None:
@@ -343,17 +349,22 @@ class Coordinator:
             raise recording
         self.deadline.observe(time.perf_counter() - sent)
         uncommitted.difference_update(results)
-        return {name: r.outputs for name, r in results.items()}
+        return {name: results[name].outputs for name in action.inputs}
 
-    def _gather(self, pending: Mapping[str, Callable[[], object]], replace: bool = False) -> dict:
+    def _gather(self, pending: Mapping[str, Callable[[], object]], replace: bool = False,
+                sent: float | None = None) -> dict:
         """Wait for every pending request; replace the subsims that died or hung (when a recovery is set and
-        restarts are left), then raise :class:`_Replaced` if ``replace``; raise any other error."""
+        restarts are left), then raise :class:`_Replaced` if ``replace``; raise any other error. With ``sent``
+        (when the requests went), a wait that had to block times its subsim's run into ``_took``."""
         results, errors = {}, {}
         for name, wait in pending.items():
+            blocks = sent is not None and not self.handles[name].replied()
             try:
                 results[name] = wait()
             except Exception as exc:
                 errors[name] = exc
+            if blocks:  # its reply came after every earlier one here: how long it took is known
+                self._took[name] = time.perf_counter() - sent
         if not errors:
             return results
         fatal = [e for e in errors.values() if not _recoverable(e)]
