@@ -37,6 +37,8 @@ RF-D auto 1.76 and 1.45, RF-C auto 2.62 and 2.93 (2.88-3.13), the paper's settin
 22.28 and 21.73. RF-D 0.10-0.105 intervals/s and 0.41-0.45 round trips/s, RF-C 0.20-0.22 and 0.60-0.66. Case 3:
 both within 1.0e-5 deg of RK-U 0.1 s to 20,000 s (RF-D 1,198 intervals, 204 rejected tries; RF-C 2,017 and 162);
 with ``--cases --case3-stop 60000``, within 1 deg of it to 52,482 s (RF-D) and 52,470 s (RF-C).
+2026-11-26, the coordinator sending the slowest subsim first (``--repeats 5``): case 1 RF-D auto 1.64 (1.60-1.71), RF-C
+auto 2.23 (2.15-2.30); case 2 1.41 (1.37-1.44) and 2.49 (2.38-2.58); accuracy figures unchanged to the digit.
 """
 
 from __future__ import annotations
