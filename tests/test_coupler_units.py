@@ -320,7 +320,8 @@ def test_an_interval_is_recorded_during_a_run_that_leaves_a_core_to_the_coordina
             assert all(any(d == pytest.approx(t0) for d in done) for t0 in np.arange(0.0, e[2] - 0.15, 0.1))
         elif e[0] == "step":
             steps_in_run += 1
-            assert last_sent is not None and last_sent[1] == {1: "b", 2: "c", 3: "b"}[cores], (i, log[:i + 1])
+            # the run it happens in, by the last request sent (a and b go in either order: the slower first)
+            assert last_sent is not None and last_sent[1] in {1: "ab", 2: "c", 3: "ab"}[cores], (i, log[:i + 1])
             if cores > 1:  # the look that finds the replies ends the writing: two steps a busy request at most
                 assert steps_in_run <= 2 * (cores - 1)  # the run of c, or of a and b
     if cores == 1:  # whole, right after the first run of the next interval is out
