@@ -339,7 +339,7 @@ class Coordinator:
             except BaseException as exc:  # raised once every request has answered: none is left in flight
                 recording = exc
         try:
-            results = self._gather(pending, replace=True, sent=sent)
+            results = self._gather(pending, replace=True, sent=sent if len(pending) > 1 else None)  # 1: no order
         except _Replaced as replaced:  # who answered has committed what rode on the request
             uncommitted.difference_update(replaced.answered)
             if recording is not None:
