@@ -98,27 +98,32 @@ def _watch_router(session: zenoh.Session, grace: float = 2.0) -> None:
 
 def main(model_cls: type[Subsim] | Subsim, argv: Sequence[str] | None = None) -> int:
     args = parse_args(model_cls, argv)
-    runtime = Runtime(model_cls, name=args.name, history_limit=args.history)
     signal.signal(signal.SIGTERM, _raise_stop)
     signal.signal(signal.SIGINT, _raise_stop)
     try:
+        runtime = Runtime(model_cls, name=args.name, history_limit=args.history)
         session = zenoh.open(client_config(args.connect, args.connect_timeout, int(args.lease * 1000),
                                           security=args.security))
-    except (zenoh.ZError, _Stop) as exc:
+    except zenoh.ZError as exc:
         print(
             f"{args.name}: cannot reach the coordinator at {args.connect} within {args.connect_timeout:g} s "
             f"(or its login/TLS refused ours: check ${ZENOH_AUTH_ENV}/--auth-file and --tls-ca) ({exc})",
             file=sys.stderr,
         )
         return 2
+    except _Stop as why:
+        if not args.quiet_stop:
+            print(f"{args.name}: stopping on {why}", file=sys.stderr)
+        return 0
+    server: CommandServer | None = None
     try:
-        server = CommandServer(
-            session, args.run, runtime, on_coordinator_lost=lambda: os.kill(os.getpid(), signal.SIGTERM),
-            key=args.security.key, max_request=args.max_request, queue_size=args.queue,
-        )
-        threading.Thread(target=_watch_router, args=(session,), daemon=True, name="router-watch").start()
-        print(f"{args.name}: serving run {args.run} via {args.connect} (pid {os.getpid()})", file=sys.stderr)
-        try:
+        try:  # a signal may come at any point from here on, even before serving starts (it is ready to be seen)
+            server = CommandServer(
+                session, args.run, runtime, on_coordinator_lost=lambda: os.kill(os.getpid(), signal.SIGTERM),
+                key=args.security.key, max_request=args.max_request, queue_size=args.queue,
+            )
+            threading.Thread(target=_watch_router, args=(session,), daemon=True, name="router-watch").start()
+            print(f"{args.name}: serving run {args.run} via {args.connect} (pid {os.getpid()})", file=sys.stderr)
             server.serve()
             if not args.quiet_stop:
                 print(f"{args.name}: shutdown requested by the coordinator", file=sys.stderr)
@@ -130,7 +135,8 @@ def main(model_cls: type[Subsim] | Subsim, argv: Sequence[str] | None = None) ->
             # reply) must not interrupt the clean-up and turn exit code 0 into a traceback
             signal.signal(signal.SIGTERM, signal.SIG_IGN)
             signal.signal(signal.SIGINT, signal.SIG_IGN)
-            server.close()
+            if server is not None:
+                server.close()
     finally:
         session.close()
     return 0
