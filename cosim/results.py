@@ -119,6 +119,11 @@ class ResultWriter:
         parts = [interval.t[:, None]] + [interval.outputs[r.subsim][r.port] for r, _ in self.signals]
         return np.hstack(parts)
 
+    def holds(self, interval: Interval) -> bool:
+        """Whether ``interval`` is the last one in the files (a signal held back while it was written is raised
+        after it is in)."""
+        return self.t_last is not None and self.t_last == float(interval.t[-1])
+
     def write(self, interval: Interval) -> None:
         """Append the interval's rows (all of them; a first row repeating the last written time is skipped)."""
         for _ in self.write_steps(interval):

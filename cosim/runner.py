@@ -234,7 +234,12 @@ def run_scenario(
         bar = Progress(scenario.start, stop, enabled=progress)
 
         def each(interval: Interval) -> Iterator[None]:  # in steps: the coordinator writes while it waits
-            yield from writer.write_steps(interval)
+            try:
+                yield from writer.write_steps(interval)
+            except interrupt.Interrupted:  # a signal held back while the interval was written: it is in the files
+                if on_interval is not None and writer.holds(interval):
+                    on_interval(interval)
+                raise
             bar.update(interval)
             if on_interval is not None:
                 on_interval(interval)

@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from cosim import interrupt
 from cosim.coupler.relaxation import Interval, RunSummary, interval_end, sample_times
 from cosim.importing import import_object
 from cosim.outputs import OutputLock, reserve_output
@@ -108,7 +109,12 @@ def _run_unified(scenario: Scenario, stop: float | None, output: Path, lock: Out
             for ref, _ in signals:
                 outputs.setdefault(ref.subsim, {})[ref.port] = columns[str(ref)][rows]
             interval = Interval(t, outputs, {}, 1, {}, wall_time=wall / n_int)
-            writer.write(interval)
+            try:
+                writer.write(interval)
+            except interrupt.Interrupted:  # a signal held back while the interval was written: it is in the files
+                if on_interval is not None and writer.holds(interval):
+                    on_interval(interval)
+                raise
             summary.add(interval)
             if on_interval is not None:
                 on_interval(interval)

@@ -113,6 +113,38 @@ def diag_rows(path: Path) -> list[list[str]]:
     return [line.split(",") for line in path.read_text().splitlines()[1:]]
 
 
+@pytest.mark.parametrize("method", ["distributed", "unified"])
+def test_an_interval_written_as_the_signal_came_counts_as_committed(tmp_path: Path, monkeypatch, method: str) -> None:
+    """A signal held back while an interval is appended is raised right after: that interval is in the files, so the
+    run's last committed time (the "stopped at t = ..." line) must be its end (once, in CI, it named the one before)."""
+    from cosim import interrupt
+    from cosim.results import ResultWriter
+    from cosim.runner import run_scenario
+    from cosim.scenario import load
+    from cosim.unified import run_unified
+
+    append, calls = ResultWriter._append, []
+
+    def append_then_signal(self, *args, **kwargs):  # noqa: ANN001, ANN202
+        append(self, *args, **kwargs)
+        calls.append(None)
+        if len(calls) == 3:  # the signal arrived inside the third interval's write, held back until it ended
+            raise interrupt.Interrupted(signal.SIGHUP)
+
+    monkeypatch.setattr(ResultWriter, "_append", append_then_signal)
+    seen: list[float] = []
+    out = tmp_path / "osc.csv"
+    with pytest.raises(interrupt.Interrupted):
+        if method == "unified":  # the satellite's RK-U (the oscillator has no unified reference)
+            run_unified(load(ROOT / "scenarios" / "satellite" / "case1.toml"), stop=2.0, output=out,
+                        on_interval=lambda iv: seen.append(float(iv.t[-1])))
+        else:
+            run_scenario(load(OSCILLATOR), stop=10.0, output=out, inprocess=True, progress=False, log=lambda s: None,
+                         on_interval=lambda iv: seen.append(float(iv.t[-1])))
+    written = diag_rows(out.with_name(out.name + ".diag.csv"))
+    assert len(written) == len(seen) == 3 and float(written[-1][2]) == seen[-1]
+
+
 def wait_for_intervals(run: Run, diag: Path, n: int, timeout: float = 120.0) -> None:
     """Until ``n`` intervals are committed (a hang guard, not a measurement)."""
     deadline = time.monotonic() + timeout
