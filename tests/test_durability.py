@@ -23,9 +23,12 @@ import numpy as np
 import pytest
 from terminal import as_from_a_terminal
 
-from cosim import __version__
+from cosim import __version__, interrupt
 from cosim.outputs import AppendFile, OutputWriteError, atomic_write, stream_path
-from cosim.results import read_results, read_units
+from cosim.results import ResultWriter, read_results, read_units
+from cosim.runner import run_scenario
+from cosim.scenario import load
+from cosim.unified import run_unified
 
 pytestmark = [pytest.mark.slow]  # the inner loop: pytest -m "not slow"
 
@@ -117,12 +120,6 @@ def diag_rows(path: Path) -> list[list[str]]:
 def test_an_interval_written_as_the_signal_came_counts_as_committed(tmp_path: Path, monkeypatch, method: str) -> None:
     """A signal held back while an interval is appended is raised right after: that interval is in the files, so the
     run's last committed time (the "stopped at t = ..." line) must be its end (once, in CI, it named the one before)."""
-    from cosim import interrupt
-    from cosim.results import ResultWriter
-    from cosim.runner import run_scenario
-    from cosim.scenario import load
-    from cosim.unified import run_unified
-
     append, calls = ResultWriter._append, []
 
     def append_then_signal(self, *args, **kwargs):  # noqa: ANN001, ANN202
