@@ -29,12 +29,17 @@ def integrate(y0: float, times: np.ndarray, u: np.ndarray) -> np.ndarray:
     return y0 + np.concatenate(([0.0], np.cumsum(steps)))
 
 
-def line(feedback_gain: float) -> Plan:
-    """a -> b -> c in order, c fed back to a with ``feedback_gain``: three levels of one subsim."""
+def line(feedback_gain: float, into_b: float | None = None) -> Plan:
+    """a -> b -> c in order, c fed back to a with ``feedback_gain``: three levels of one subsim. With ``into_b``, c is
+    also fed back into b (input ``v``) with that gain, so that b's inputs change at every stage even when a's
+    outputs do not (a subsim whose inputs repeat bit for bit is not run again)."""
     couplings = [Coupling.make("b.u", "a.y"), Coupling.make("c.u", "b.y"),
                  Coupling.make("a.u", "c.y", "gain", {"k": feedback_gain})]
-    plan = Plan.build({n: {"u": 1} for n in "abc"}, {n: {"y": 1} for n in "abc"}, couplings, "distributed",
-                      order=["a", "b", "c"])
+    inputs = {n: {"u": 1} for n in "abc"}
+    if into_b is not None:
+        couplings.append(Coupling.make("b.v", "c.y", "gain", {"k": into_b}))
+        inputs["b"]["v"] = 1
+    plan = Plan.build(inputs, {n: {"y": 1} for n in "abc"}, couplings, "distributed", order=["a", "b", "c"])
     assert plan.levels == (("a",), ("b",), ("c",))
     return plan
 
@@ -52,7 +57,7 @@ def drive(plan: Plan, speculate: bool, t_stop: float,
         reply = None
         if isinstance(action, Run):  # each subsim starts from its own y0 = 1, 2, 3 in every interval
             runs.append((len(commits), action.stage, tuple(action.inputs)))
-            reply = {n: {"y": integrate(1.0 + names.index(n), action.times, ins["u"][:, 0])[:, None]}
+            reply = {n: {"y": integrate(1.0 + names.index(n), action.times, sum(ins.values())[:, 0])[:, None]}
                      for n, ins in action.inputs.items()}
         elif isinstance(action, Commit):
             commits.append(action.interval.outputs)
@@ -65,7 +70,8 @@ def same_bits(x: list[dict], y: list[dict], names: str = "abc") -> bool:
 
 
 def test_a_subsim_that_stops_moving_lets_the_next_level_run_beside_it_with_the_same_bits() -> None:
-    plan = line(1e-30)  # a's input is far below a's rounding: a repeats its output bit for bit at every stage
+    # a's input is far below a's rounding: a repeats its output bit for bit at every stage; b's other input moves
+    plan = line(1e-30, into_b=-0.5)
     in_order, expected = drive(plan, False, 1.0)
     speculated, commits = drive(plan, True, 1.0)
     assert same_bits(commits, expected) and len(commits) == 4
@@ -78,7 +84,9 @@ def test_a_subsim_that_stops_moving_lets_the_next_level_run_beside_it_with_the_s
 
 
 def test_when_nothing_repeats_the_results_and_round_trips_are_the_in_order_ones() -> None:
-    plan = line(-1.0)  # tightly coupled: every subsim moves at every stage
+    # tightly coupled: every subsim moves at every stage. (Without c -> b, b's speculative inputs would be a's outputs
+    # of the previous stage alone: b's inputs of its latest run, which is not run again, so a try would cost nothing)
+    plan = line(-1.0, into_b=-0.5)
     in_order, expected = drive(plan, False, 20.0)
     speculated, commits = drive(plan, True, 20.0)
     assert same_bits(commits, expected) and len(commits) == 80
