@@ -83,6 +83,7 @@ def run_one(case: int, method: str, stop: float, out: Path, inprocess: bool, pro
     return {"wall_s": wall, "cpu_s": cpu, "stop": stop, "t_end": report.summary.t_end,
             "intervals": report.summary.intervals, "stages": dict(report.summary.stages),
             "round_trips": getattr(report.summary, "round_trips", 0),
+            "requests": getattr(report.summary, "requests", 0),
             "transport": "in-process" if inprocess or method == "unified" else "zenoh"}
 
 
@@ -199,7 +200,8 @@ def first_exceeding(t: np.ndarray, dev: np.ndarray, level: float) -> float | Non
 
 
 def print_floors(method: str, stages: float, rk_u: float, rtt: float, request_cpu: float | None,
-                 physics: dict[str, float], one_process: float | None, trips: float | None = None) -> None:
+                 physics: dict[str, float], one_process: float | None, trips: float | None = None,
+                 requests: float | None = None) -> None:
     """Lower bounds under a coupled run's wall time per interval, as multiples of RK-U's (``rk_u`` s).
 
     Two of each: the models' physics and the bus alone, and this framework's work (the same run timed in
@@ -211,7 +213,9 @@ def print_floors(method: str, stages: float, rk_u: float, rtt: float, request_cp
     transport = trips * rtt / rk_u
     every_model = stages * sum(physics.values()) / rk_u
     slowest_model = stages * max(physics.values()) / rk_u
-    requests, cores = stages * len(physics), os.cpu_count() or 1
+    if not requests:  # the runs' own count (a subsim whose inputs repeat is not run again); else every subsim
+        requests = stages * len(physics)
+    cores = os.cpu_count() or 1
     print(f"    floors, as multiples of RK-U: transport {trips:.1f} sequential round trips x {rtt * 1e6:.0f} us = "
           f"{transport:.1f}x; physics alone {every_model if method == 'distributed' else slowest_model:.1f}x"
           + (f"; each request's Zenoh and codec CPU {request_cpu * 1e6:.0f} us" if request_cpu else ""))
@@ -222,7 +226,7 @@ def print_floors(method: str, stages: float, rk_u: float, rtt: float, request_cp
         if not request_cpu:
             return "(no request CPU measured)"
         cpu = work + requests * request_cpu / rk_u
-        return f"CPU of the work and {requests:.0f} requests over {cores} cores = {cpu / cores:.1f}x"
+        return f"CPU of the work and {requests:.1f} requests over {cores} cores = {cpu / cores:.1f}x"
 
     models_only = bound(every_model)
     if method == "centralized":
@@ -265,8 +269,9 @@ def report_case(case: int, out: Path, timings: dict, window: float, level: float
                 stages = sum(k * v for k, v in hist.items()) / sum(hist.values())
                 one_process = timings.get(f"case{case}-{method}-one_process_s")
                 trips = tm.get("round_trips", 0) / tm["intervals"]
+                requests = tm.get("requests", 0) / tm["intervals"]
                 print_floors(method, stages, u["wall_s"] / tm["intervals"], rtt, request_cpu, physics, one_process,
-                             trips)
+                             trips, requests)
 
     runs = load_case(out, case)
     pairs = [(m, "unified") for m in ("distributed", "centralized") if m in runs and "unified" in runs]
