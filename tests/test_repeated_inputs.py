@@ -7,16 +7,22 @@ request at all. The subsims here are written in the test, so every expected valu
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
+from cosim.contract import SubsimDied
 from cosim.coupler.convergence import Tolerance
 from cosim.coupler.couplings import Coupling
 from cosim.coupler.plan import Plan
 from cosim.coupler.relaxation import Commit, Done, Relaxation, Run, Settings
+from cosim.driver import Coordinator, Recovery, Restart
+from cosim.handles import InProcessHandle
 from cosim.runner import run_scenario
 from cosim.scenario import load
+from cosim.subsim import Subsim
+from subsims.integrator.subsim import Integrator
 
 ROOT = Path(__file__).resolve().parents[1]
 Model = dict  # subsim name -> function (times, inputs) -> output samples (n,)
@@ -108,8 +114,9 @@ def test_distributed_skips_the_subsims_downstream_of_one_that_repeated_its_outpu
 def test_the_paper_satellite_rf_c_runs_orbit_once_less_an_interval_with_the_paper_stage_series(
     tmp_path: Path,
 ) -> None:
-    # at the paper's settings orbit's input (the aero force, rotated to inertial axes) at RF-C's last stage is its
-    # input of the stage before, bit for bit: 14 requests an interval instead of 15, in 5 stages as in the paper
+    # at RF-C's stage 0 aero gets the zero first guess (R = V = 0), so its force is zero: orbit's stage-1 input (that
+    # force, rotated to inertial axes) is the zero guess it ran on at stage 0, bit for bit. 14 requests an interval
+    # instead of 15, in 5 stages as in the paper
     report = run_scenario(load(ROOT / "scenarios/satellite/case1.toml"), method="centralized", stop=20.0,
                           output=tmp_path / "x.csv", inprocess=True, progress=False, log=lambda s: None)
     summary = report.summary
@@ -117,3 +124,54 @@ def test_the_paper_satellite_rf_c_runs_orbit_once_less_an_interval_with_the_pape
     assert summary.stages == {5: 50}
     assert summary.round_trips == 5 * 50
     assert 14 * 50 <= summary.requests <= 14 * 50 + 1
+
+
+class DiesOnce(InProcessHandle):
+    """An in-process subsim that "dies" (``SubsimDied``) on its ``die_at``-th run_interval, as a killed one would."""
+
+    def __init__(self, model: Subsim, name: str, die_at: int) -> None:
+        super().__init__(model, name)
+        self.runs, self.die_at = 0, die_at
+
+    def _begin(self, cmd: str, args: dict) -> Callable[[], dict]:
+        if cmd == "run_interval":
+            self.runs += 1
+            if self.runs == self.die_at:
+                def dead() -> dict:
+                    raise SubsimDied("no_responder", "killed by the test", self.name, cmd)
+
+                return dead
+        return super()._begin(cmd, args)
+
+
+def test_a_subsim_replaced_after_intervals_where_it_was_not_run_again_replays_to_the_same_bits() -> None:
+    # RF-C over in-process integrators: a and b feed each other; "src" has no coupled input (zero), so from stage 1 on
+    # its inputs repeat and it is left out of every Run but the first of each interval, the last stage's included.
+    # src dies at its 6th run (interval 6, stage 0, carrying the commit of interval 5); its replacement is restored
+    # from the checkpoint after interval 3 and replays 4 and 5 on the inputs the driver journaled for it, which must
+    # be there although src was in none of those intervals' last runs: every result and final state as undisturbed
+    couplings = [Coupling.make("a.u", "b.y", "gain", {"k": -0.8}), Coupling.make("b.u", "a.y")]
+    y0 = {"src": 2.0, "a": 1.0, "b": 0.5}
+    settings = Settings(method="centralized", interval=0.1, samples=4, first_guess="zero", tol=Tolerance(1e-12, 1e-14))
+
+    def handle(name: str, die_at: int = 0) -> InProcessHandle:
+        h = DiesOnce(Integrator(), name, die_at) if die_at else InProcessHandle(Integrator(), name)
+        h.configure({"y0": [y0[name]]})
+        return h
+
+    def run(die_at: int) -> tuple[list[bytes], list[Restart], int]:
+        handles = {name: handle(name, die_at if name == "src" else 0) for name in y0}
+        recovery = Recovery(lambda name: handle(name), restarts=1, checkpoint_every=3, log=lambda s: None)
+        coordinator = Coordinator(handles, couplings, settings, recovery=recovery)
+        intervals: list = []
+        coordinator.run(0.0, 8 * settings.interval, intervals.append)
+        rows = [iv.t.tobytes() + b"".join(iv.outputs[n]["y"].tobytes() for n in sorted(y0)) for iv in intervals]
+        states = [coordinator.handles[n].get_state() for n in sorted(y0)]
+        runs = handles["src"].runs if isinstance(handles["src"], DiesOnce) else 0
+        return rows + [np.float64(s.time).tobytes() + s.state.tobytes() for s in states], coordinator.restarts, runs
+
+    undisturbed, none, _ = run(0)
+    replaced, restarts, src_runs = run(6)
+    assert none == [] and src_runs == 6  # src ran once an interval
+    assert len(restarts) == 1 and restarts[0].subsim == "src" and restarts[0].replayed == 2
+    assert replaced == undisturbed

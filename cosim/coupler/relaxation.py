@@ -12,8 +12,8 @@ back bit for bit the same (its inputs were then exactly the in-order ones: the s
 less), else run again in order.
 Both check from stage 1 on, as the paper's listings do (stage 0 runs on the first guess). Neither runs a subsim
 again on inputs that are, bit for bit, those of its latest run in the interval: ``advance`` is pure and the
-subsim commits its latest trial, so its outputs are reused (RF-C on the paper's satellite: orbit at the last stage,
-14 requests an interval instead of 15).
+subsim commits its latest trial, so its outputs are reused (RF-C on the paper's satellite: orbit at stage 1, whose
+input, aero's force on the zero first guess, is zero again: 14 requests an interval instead of 15).
 
 The machine does no I/O and reads no clock. It emits actions and takes results (the h11 pattern)::
 
