@@ -23,7 +23,8 @@ request is repeated. Six ways, interleaved in rounds so that load drifts hit all
 Then the framework overhead ratio (a)/(c), split at (e): (e)/(c) is the subsim's own work in its place,
 (a)/(e) the rest (client side, seals, the serving thread's bookkeeping); (f)/(c) beside (e)/(c) tells
 whether that work costs by its CPU or by the code it touches (cold after every wait); (a) once more against an
-integrator process that times its own ``answer()`` (server work vs transport); and where the
+integrator process that times its own ``answer()`` (server work vs transport) and each phase of its serving path
+around it (tag check, answer, seal, reply), beside the bare responder (e)'s reply after the same work; and where the
 framework's time goes: the CPU time of each stage of the request path, in this process. Prints
 figures; asserts nothing.
 """
@@ -31,6 +32,7 @@ figures; asserts nothing.
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import signal
 import statistics
@@ -107,6 +109,7 @@ def serve_bare(endpoint: str, run: str, reply_size: int, name: str = "bare", mod
     checked = None
     loop = loop_like_answer() if mode == "loop" else 0
     security = ClientSecurity.from_env()  # the run's login (the bare responder seals nothing)
+    replying: list[tuple[int, int]] = []  # per request: ns in query.reply, ns dropping the query (its final message)
     with zenoh.open(client_config(endpoint, 10.0, security=security)) as session:
         queryable = session.declare_queryable(bare_key(run, name), zenoh.handlers.FifoChannel(64))
         # exit with the coordinator, as real subsims do
@@ -120,8 +123,9 @@ def serve_bare(endpoint: str, run: str, reply_size: int, name: str = "bare", mod
                 query = queryable.recv()
                 with query:
                     payload = query.payload.to_bytes() if query.payload is not None else b""
-                    if payload == STOP:
-                        query.reply(query.key_expr, b"bye")
+                    if payload == STOP:  # answered with the medians of the replying times, in us
+                        medians = [statistics.median(x) / 1e3 for x in zip(*replying)] if replying else []
+                        query.reply(query.key_expr, json.dumps(medians).encode())
                         return 0
                     if payload != b"ping" and runtime is not None:
                         result = answer(runtime, payload)
@@ -131,7 +135,12 @@ def serve_bare(endpoint: str, run: str, reply_size: int, name: str = "bare", mod
                                 raise SystemExit(f"bare responder: answer() refused the request: {checked.message}")
                     elif payload != b"ping" and loop:
                         busy_loop(loop)
+                    t0 = time.perf_counter_ns()
                     query.reply(query.key_expr, reply)
+                    t1 = time.perf_counter_ns()
+                t2 = time.perf_counter_ns()
+                if payload != b"ping":
+                    replying.append((t1 - t0, t2 - t1))
         finally:
             token.undeclare()
             watch.undeclare()
@@ -139,18 +148,20 @@ def serve_bare(endpoint: str, run: str, reply_size: int, name: str = "bare", mod
 
 
 def serve_timed(endpoint: str, run: str, name: str) -> int:
-    """The integrator subsim process, with ``answer()`` timed (wall and CPU) in the process itself.
+    """The integrator subsim process, with ``answer()`` timed (wall and CPU) in the process itself, and the phases
+    of its serving path around it (wall): the real code, its methods wrapped with clocks.
 
-    Prints the medians of the run_interval requests as one JSON line on stdout when it exits.
+    Prints, per run_interval request, those times as one JSON line on stdout when it exits.
     """
-    import json
-
     import cosim.protocol.service as service
     from cosim.process import main as serve_model
+    from cosim.protocol.transport.server import CommandServer
 
     untimed = service.answer
     wall: list[float] = []
     cpu: list[float] = []
+    phases: dict[str, list[float]] = {k: [] for k in ("callback", "admit", "serve", "gate_answer")}
+    current: dict[str, float] = {}
 
     def timed(runtime: Runtime, payload: bytes) -> bytes:
         w0, c0 = time.perf_counter_ns(), time.thread_time_ns()
@@ -160,16 +171,40 @@ def serve_timed(endpoint: str, run: str, name: str) -> int:
             cpu.append((time.thread_time_ns() - c0) / 1e3)
         return reply
 
+    def clocked(phase: str, method: Callable) -> Callable:
+        def wrapper(*args: object) -> object:
+            t0 = time.perf_counter_ns()
+            try:
+                return method(*args)
+            finally:
+                current[phase] = (time.perf_counter_ns() - t0) / 1e3
+                if phase == "callback" and current.pop("cmd", None) == "run_interval":
+                    for k in phases:
+                        phases[k].append(current[k])
+                if phase == "callback":
+                    current.clear()
+
+        return wrapper
+
+    serve_one = CommandServer._answer
+
+    def serving(self: CommandServer, query: object, key_expr: object, request: object, cmd: str | None) -> None:
+        current["cmd"] = cmd or ""
+        serve_one(self, query, key_expr, request, cmd)
+
     service.answer = timed  # Gate.answer looks the name up at each request
+    service.Gate.admit = clocked("admit", service.Gate.admit)
+    service.Gate.answer = clocked("gate_answer", service.Gate.answer)
+    CommandServer._answer = clocked("serve", serving)
+    CommandServer._on_query = clocked("callback", CommandServer._on_query)
     rc = serve_model(Integrator, ["--connect", endpoint, "--run", run, "--name", name])
-    print(json.dumps({"n": len(wall), "wall": wall, "cpu": cpu}), flush=True)
+    print(json.dumps({"n": len(wall), "wall": wall, "cpu": cpu, "phases": phases}), flush=True)
     return rc
 
 
-def in_situ(bus: Bus, warmup: int, count: int) -> tuple[list[float], list[float], list[float]]:
-    """(client round trips, answer() wall times, answer() CPU times) of run_interval, in microseconds."""
-    import json
-
+def in_situ(bus: Bus, warmup: int, count: int) -> tuple[list[float], list[float], list[float], dict[str, list[float]]]:
+    """(client round trips, answer() wall times, answer() CPU times, the serving phases' wall times) of run_interval,
+    in microseconds."""
     name = "integ-timed"
     popen = subprocess.Popen(
         [sys.executable, str(Path(__file__).resolve()), "--timed-subsim", bus.endpoint, bus.run, name],
@@ -192,7 +227,7 @@ def in_situ(bus: Bus, warmup: int, count: int) -> tuple[list[float], list[float]
             popen.kill()
             popen.wait()
     stats = json.loads(out.strip().splitlines()[-1])
-    return rtt, stats["wall"][warmup:], stats["cpu"][warmup:]
+    return rtt, stats["wall"][warmup:], stats["cpu"][warmup:], {k: v[warmup:] for k, v in stats["phases"].items()}
 
 
 class BareClient:
@@ -224,13 +259,18 @@ class BareClient:
             return reply.ok.payload.to_bytes()
         raise RuntimeError("no reply from the bare responder")
 
-    def close(self) -> None:
+    def close(self) -> list[float]:
+        """Stop the responder; its medians (us) of the time in ``query.reply`` and in dropping the query."""
+        medians: list[float] = []
         try:
             if self.popen.poll() is None:
-                self._answers(STOP)
+                for r in self.session.get(self.key, payload=STOP, timeout=1.0):
+                    if r.ok is not None:
+                        medians = json.loads(r.ok.payload.to_bytes())
             self.popen.wait(3.0)
         except Exception:
             terminate(self.popen)
+        return medians
 
 
 # --- measurement ---------------------------------------------------------------------------------------
@@ -335,6 +375,7 @@ def main(argv: list[str] | None = None) -> int:
         inproc.configure(PARAMS)
         bare = BareClient(bus, len(reply))
         bare_work = bare_loop = None
+        bare_replying: list[float] = []
         try:
             bare_work = BareClient(bus, len(reply), mode="work")
             bare_loop = BareClient(bus, len(reply), mode="loop")
@@ -359,10 +400,11 @@ def main(argv: list[str] | None = None) -> int:
                     samples[name] += sample(fn, per_round)
         finally:
             bare.close()
-            for client in (bare_work, bare_loop):
-                if client is not None:
-                    client.close()
-        rtt, srv_wall, srv_cpu = in_situ(bus, a.warmup, a.samples)
+            if bare_work is not None:
+                bare_replying = bare_work.close()
+            if bare_loop is not None:
+                bare_loop.close()
+        rtt, srv_wall, srv_cpu, phases = in_situ(bus, a.warmup, a.samples)
 
     load = os.getloadavg()
     print(f"run_interval round trip: integrator size {SIZE}, {N} samples over [0, 0.4], input segment {N}x{SIZE}")
@@ -401,6 +443,19 @@ def main(argv: list[str] | None = None) -> int:
         f"CPU {pct(srv_cpu, 50):.1f}; so transport + client side {pct(rtt, 50) - pct(srv_wall, 50):.1f} "
         f"(bare zenoh (c): {pct(rc, 50):.1f})"
     )
+    med = {k: pct(v, 50) for k, v in phases.items()}
+    print(
+        f"  the subsim's serving path, wall, medians: the whole callback {med['callback']:.1f} = entry, key check, "
+        f"command peek and lock {med['callback'] - med['admit'] - med['serve']:.1f} + tag check (admit) "
+        f"{med['admit']:.1f} + answer() {pct(srv_wall, 50):.1f} + replay check and reply seal "
+        f"{med['gate_answer'] - pct(srv_wall, 50):.1f} + query.reply and dropping the query "
+        f"{med['serve'] - med['gate_answer']:.1f}"
+    )
+    if bare_replying:
+        print(
+            f"  the bare responder (e), after the same answer(): query.reply {bare_replying[0]:.1f}, dropping the "
+            f"query {bare_replying[1]:.1f} (the reply is on its way during both; the drop sends the final message)"
+        )
     print()
     print("where the framework's time goes (CPU time per call in this process, median of batch means):")
     print(f"| {'stage':<64} | us/call |")
