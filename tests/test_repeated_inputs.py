@@ -25,7 +25,7 @@ from cosim.subsim import Subsim
 from subsims.integrator.subsim import Integrator
 
 ROOT = Path(__file__).resolve().parents[1]
-Model = dict  # subsim name -> function (times, inputs) -> output samples (n,)
+Models = dict[str, Callable[[np.ndarray, np.ndarray], np.ndarray]]  # subsim -> (times, u (n,)) -> y (n,)
 
 
 def trapezoid(y0: float, times: np.ndarray, u: np.ndarray) -> np.ndarray:
@@ -33,7 +33,7 @@ def trapezoid(y0: float, times: np.ndarray, u: np.ndarray) -> np.ndarray:
     return y0 + np.concatenate(([0.0], np.cumsum(np.diff(times) * (u[1:] + u[:-1]) / 2.0)))
 
 
-def drive(plan: Plan, method: str, models: Model, t_stop: float) -> tuple[list[list[tuple[str, ...]]], list, list]:
+def drive(plan: Plan, method: str, models: Models, t_stop: float) -> tuple[list[list[tuple[str, ...]]], list, list]:
     """The subsims of every Run, grouped per interval; every committed Interval; every (subsim, inputs) run."""
     s = Settings(method=method, interval=0.5, samples=5, first_guess="zero", tol=Tolerance(1e-13, 1e-15))
     steps = Relaxation(plan, s).run(0.0, t_stop)
