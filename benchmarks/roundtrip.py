@@ -178,10 +178,10 @@ def serve_timed(endpoint: str, run: str, name: str) -> int:
                 return method(*args)
             finally:
                 current[phase] = (time.perf_counter_ns() - t0) / 1e3
-                if phase == "callback" and current.pop("cmd", None) == "run_interval":
-                    for k in phases:
-                        phases[k].append(current[k])
-                if phase == "callback":
+                if phase == "callback":  # the request's end; one queued for the serving thread has no phases here
+                    if current.get("cmd") == "run_interval" and phases.keys() <= current.keys():
+                        for k in phases:
+                            phases[k].append(current[k])
                     current.clear()
 
         return wrapper
