@@ -19,10 +19,17 @@ request is repeated. Six ways, interleaved in rounds so that load drifts hit all
                reply: what that work costs on the wire, where it runs after a wait, with cold caches
   (f) bare+loop  as (e), but the work is a pure-Python loop of additions that takes, repeated in one
                process, as long as that ``answer()``: the same CPU with a small code footprint
+  (g) lean     the least a sealed run_interval can cost in Python, both sides: the client seals the request and
+               opens and unpacks the reply into array views; the responder checks the tag, unpacks with msgpack
+               into array views, runs the same Runtime's interpolant and model.advance, packs, seals (no schema
+               checks, runtime checks, handles, serving thread or replay window)
+  (h) lean, no model  as (g), but the responder echoes its input as the output: seals, msgpack and zenoh only
 
 Then the framework overhead ratio (a)/(c), split at (e): (e)/(c) is the subsim's own work in its place,
 (a)/(e) the rest (client side, seals, the serving thread's bookkeeping); (f)/(c) beside (e)/(c) tells
-whether that work costs by its CPU or by the code it touches (cold after every wait); (a) once more against an
+whether that work costs by its CPU or by the code it touches (cold after every wait); (g)/(c) and (h)/(c)
+are the floor any Python design with these seals, this codec and this model would stand on, and (a)/(g) what the
+framework's plumbing costs above it; (a) once more against an
 integrator process that times its own ``answer()`` (server work vs transport) and each phase of its serving path
 around it (tag check, answer, seal, reply), beside the bare responder (e)'s reply after the same work; and where the
 framework's time goes: the CPU time of each stage of the request path, in this process. Prints
@@ -42,22 +49,35 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+import msgpack
 import numpy as np
 import zenoh
 
+from cosim.contract import PROTOCOL_VERSION
 from cosim.handles import InProcessHandle
 from cosim.launch import Bus, terminate
 from cosim.protocol.keys import coordinator_alive_key
-from cosim.protocol.messages import ErrorInfo, decode_reply, decode_request, encode_request, encode_result
-from cosim.protocol.security import ClientSecurity
+from cosim.protocol.messages import (
+    ErrorInfo,
+    Sealer,
+    decode_reply,
+    decode_request,
+    encode_request,
+    encode_result,
+    next_seq,
+    sealer,
+)
+from cosim.protocol.security import SECRET_ENV, ClientSecurity, parse_key
 from cosim.protocol.service import answer
 from cosim.protocol.transport.session import client_config
+from cosim.protocol.wire import encode_array, pack
 from cosim.runtime import Runtime
 from cosim.signals import check_time_grid
 from subsims.integrator.model import gauss_nodes
 from subsims.integrator.subsim import Integrator
 
 SIZE, N = 6, 5
+F8 = np.dtype("<f8")
 PARAMS = {"size": SIZE, "y0": [0.0] * SIZE}
 TIMES = np.linspace(0.0, 0.4, N)
 INPUTS = {"u": np.random.default_rng(2024).normal(size=(N, SIZE))}
@@ -82,6 +102,27 @@ def benchmark_request() -> bytes:
     return encode_request("run_interval", {"t": TIMES, "inputs": INPUTS, "interp": "linear"})
 
 
+def lean_request() -> bytes:
+    """What (g) sends each call: the same msgpack body as :func:`benchmark_request`, packed without the codec."""
+    args = {"t": encode_array(TIMES), "inputs": {k: encode_array(v) for k, v in INPUTS.items()}, "interp": "linear"}
+    return pack({"v": PROTOCOL_VERSION, "cmd": "run_interval", "args": args})
+
+
+def lean_answer(runtime: Runtime, opener: Sealer, frame: bytes, model: bool) -> bytes:
+    """(g)'s responder: tag check, msgpack, array views, the model (or an echo of the input), msgpack, seal."""
+    seq, body = opener.open_request(frame)
+    args = msgpack.unpackb(body)["args"]
+    t = args["t"]
+    times = np.ndarray(t["shape"], F8, t["data"])
+    inputs = {k: np.ndarray(v["shape"], F8, v["data"]) for k, v in args["inputs"].items()}
+    if model:
+        outputs, _ = runtime.model.advance(runtime.state, times, runtime._input_function(times, inputs, "linear"))
+    else:
+        outputs = {"y": inputs["u"]}
+    result = {"t": t, "outputs": {k: encode_array(v) for k, v in outputs.items()}, "end_time": float(times[-1])}
+    return opener.seal_reply(seq, pack({"v": PROTOCOL_VERSION, "ok": True, "result": result}))
+
+
 def busy_loop(n: int) -> int:
     """Pure-Python additions: CPU time with a small code footprint."""
     x = 0
@@ -98,14 +139,17 @@ def loop_like_answer() -> int:
 def serve_bare(endpoint: str, run: str, reply_size: int, name: str = "bare", mode: str = "fixed") -> int:
     """Answer every query on the bare key with ``reply_size`` fixed bytes until told to stop. First, with mode
     ``work``, run the integrator subsim's ``answer()`` on the query's payload (an unsealed run_interval); with
-    ``loop``, :func:`busy_loop` for as long as that takes warm."""
+    ``loop``, :func:`busy_loop` for as long as that takes warm. With ``lean`` and ``lean-no-model`` the reply is
+    :func:`lean_answer`'s instead (a sealed request in, a sealed reply out)."""
 
     def stop(signum: int, frame: object) -> None:
         raise SystemExit(0)
 
     signal.signal(signal.SIGTERM, stop)
     reply = bytes(range(256)) * (reply_size // 256) + bytes(reply_size % 256)
-    runtime = integrator_runtime() if mode == "work" else None
+    lean = mode in ("lean", "lean-no-model")
+    runtime = integrator_runtime() if mode == "work" or lean else None
+    opener = sealer(parse_key(os.environ[SECRET_ENV])) if lean else None
     checked = None
     loop = loop_like_answer() if mode == "loop" else 0
     security = ClientSecurity.from_env()  # the run's login (the bare responder seals nothing)
@@ -127,7 +171,9 @@ def serve_bare(endpoint: str, run: str, reply_size: int, name: str = "bare", mod
                         medians = [statistics.median(x) / 1e3 for x in zip(*replying)] if replying else []
                         query.reply(query.key_expr, json.dumps(medians).encode())
                         return 0
-                    if payload != b"ping" and runtime is not None:
+                    if payload != b"ping" and lean:
+                        reply = lean_answer(runtime, opener, payload, model=mode == "lean")
+                    elif payload != b"ping" and runtime is not None:
                         result = answer(runtime, payload)
                         if checked is None:  # once: the work done must be the model's run, not an error reply
                             checked = decode_reply("run_interval", result)
@@ -252,6 +298,15 @@ class BareClient:
         replies = self.session.get(self.key, payload=payload, timeout=1.0)
         return any(r.ok is not None for r in replies)
 
+    def call_lean(self, key: bytes) -> dict[str, np.ndarray]:
+        """(g)'s client: seal a freshly packed request, open the reply, unpack its outputs into array views."""
+        seq, opener = next_seq(), sealer(key)
+        for reply in self.session.get(self.key, payload=opener.seal_request(seq, lean_request()), timeout=10.0,
+                                      consolidation=zenoh.ConsolidationMode.NONE):
+            result = msgpack.unpackb(opener.open_reply(seq, reply.ok.payload.to_bytes()))["result"]
+            return {k: np.ndarray(v["shape"], F8, v["data"]) for k, v in result["outputs"].items()}
+        raise RuntimeError("no reply from the lean responder")
+
     def call(self, payload: bytes) -> bytes:
         for reply in self.session.get(
             self.key, payload=payload, timeout=10.0, consolidation=zenoh.ConsolidationMode.NONE
@@ -374,15 +429,20 @@ def main(argv: list[str] | None = None) -> int:
         inproc = InProcessHandle(Integrator(), "integ")
         inproc.configure(PARAMS)
         bare = BareClient(bus, len(reply))
-        bare_work = bare_loop = None
+        bare_work = bare_loop = lean = lean_echo = None
         bare_replying: list[float] = []
         try:
             bare_work = BareClient(bus, len(reply), mode="work")
             bare_loop = BareClient(bus, len(reply), mode="loop")
+            lean = BareClient(bus, len(reply), mode="lean")
+            lean_echo = BareClient(bus, len(reply), mode="lean-no-model")
+            lean_key, echo_key = bus.key("bare-lean"), bus.key("bare-lean-no-model")
             # the ways must agree before their times mean anything
             r_remote, r_inproc = remote.run_interval(TIMES, INPUTS), inproc.run_interval(TIMES, INPUTS)
             assert r_remote.outputs["y"].tobytes() == r_inproc.outputs["y"].tobytes()
             assert len(bare.call(request)) == len(bare_work.call(request)) == len(bare_loop.call(request)) == len(reply)
+            assert lean.call_lean(lean_key)["y"].tobytes() == r_remote.outputs["y"].tobytes()
+            assert lean_echo.call_lean(echo_key)["y"].tobytes() == INPUTS["u"].tobytes()
             ways: dict[str, Callable[[], object]] = {
                 "(a) remote handle, spawned process": lambda: remote.run_interval(TIMES, INPUTS),
                 "(b) in-process handle": lambda: inproc.run_interval(TIMES, INPUTS),
@@ -390,6 +450,8 @@ def main(argv: list[str] | None = None) -> int:
                 "(d) remote handle, status (no model work)": remote.status,
                 "(e) bare, responder runs answer() first": lambda: bare_work.call(request),
                 "(f) bare, responder loops as long first": lambda: bare_loop.call(request),
+                "(g) lean: seals, msgpack, the same model": lambda: lean.call_lean(lean_key),
+                "(h) lean, no model (echo)": lambda: lean_echo.call_lean(echo_key),
             }
             for fn in ways.values():
                 sample(fn, a.warmup)
@@ -402,8 +464,9 @@ def main(argv: list[str] | None = None) -> int:
             bare.close()
             if bare_work is not None:
                 bare_replying = bare_work.close()
-            if bare_loop is not None:
-                bare_loop.close()
+            for client in (bare_loop, lean, lean_echo):
+                if client is not None:
+                    client.close()
         rtt, srv_wall, srv_cpu, phases = in_situ(bus, a.warmup, a.samples)
 
     load = os.getloadavg()
@@ -417,7 +480,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"|{'-' * 44}|-------------|----------|---------|")
     for name, xs in samples.items():
         print(f"| {name:<42} | {pct(xs, 50):11.1f} | {pct(xs, 90):8.1f} | {len(xs):7d} |")
-    ra, _, rc, _, re, rf = samples.values()
+    ra, _, rc, _, re, rf, rg, rh = samples.values()
     med = pct(ra, 50) / pct(rc, 50)
     print()
     print(
@@ -435,6 +498,13 @@ def main(argv: list[str] | None = None) -> int:
     print(
         f"  the same warm CPU in a pure-Python loop (small code footprint), (f)/(c): {pct(rf, 50) / pct(rc, 50):.2f}x "
         f"(+{pct(rf, 50) - pct(rc, 50):.1f} us, against +{pct(re, 50) - pct(rc, 50):.1f} us for answer())"
+    )
+    print(
+        f"  the floor of any Python design with these seals, msgpack and this model (g)/(c): "
+        f"{pct(rg, 50) / pct(rc, 50):.2f}x (+{pct(rg, 50) - pct(rc, 50):.1f} us); without the model, (h)/(c): "
+        f"{pct(rh, 50) / pct(rc, 50):.2f}x (+{pct(rh, 50) - pct(rc, 50):.1f} us); the framework's plumbing above "
+        f"that floor (schema and runtime checks, handles, serving thread, replay window), (a)/(g): "
+        f"{pct(ra, 50) / pct(rg, 50):.2f}x (+{pct(ra, 50) - pct(rg, 50):.1f} us)"
     )
     print()
     print("(a) again, against an integrator process that times answer() itself (medians, us):")
