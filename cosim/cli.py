@@ -75,6 +75,11 @@ def _run_until_done(args: argparse.Namespace, state: dict) -> int:
     hist = ", ".join(f"{k} stages: {v}" for k, v in sorted(s.stages.items()))
     print(f"{scenario.name} ({report.method}): {s.intervals} intervals to t = {s.t_end:.6g} in {s.wall_time:.2f} s"
           f"{f' ({hist})' if hist else ''}")
+    if report.method != "unified" and s.intervals:  # what the run cost in requests (rejected tries included)
+        span = s.t_end - s.t_start
+        per_second = f" ({s.round_trips / span:.3g} round trips per simulated second)" if span > 0 else ""
+        print(f"requests: {s.requests / s.intervals:.2f} an interval, sent in {s.round_trips / s.intervals:.2f} "
+              f"round trips{per_second}")
     for r in report.extra.get("restarts", []):
         print(f"restart: {r.subsim} {r.reason}; restored to t = {r.at:g}")
     if report.method == "distributed":

@@ -89,6 +89,22 @@ def test_run_writes_results_and_diagnostics_and_leaves_no_process(tmp_path: Path
     assert serving(tag) == []  # neither the coordinator nor any subsim it started is left
 
 
+def test_run_says_what_it_cost_in_requests(tmp_path: Path) -> None:
+    # the paper's satellite, RF-C: 5 stages an interval; orbit's input at stage 1 (aero's force on the zero first
+    # guess) is zero again, so it is not run: 3 + 2 + 3 + 3 + 3 = 14 requests in 5 round trips, 5 per 0.4 s
+    satellite = ROOT / "scenarios" / "satellite" / "case1.toml"
+    done = subprocess.run([*COSIM, "run", str(satellite), "--stop", "4", "--output", str(tmp_path / "c.csv"),
+                           "--inprocess", "--method", "centralized", "--quiet"], capture_output=True, text=True,
+                          timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert "10 intervals to t = 4 " in done.stdout and "(5 stages: 10)" in done.stdout
+    cost = "requests: 14.00 an interval, sent in 5.00 round trips (12.5 round trips per simulated second)"
+    assert cost in done.stdout
+    unified = subprocess.run([*COSIM, "run", str(satellite), "--stop", "4", "--output", str(tmp_path / "u.csv"),
+                              "--method", "unified", "--quiet"], capture_output=True, text=True, timeout=120)
+    assert unified.returncode == 0 and "requests:" not in unified.stdout  # one program: no requests
+
+
 def test_npz_output_by_suffix_in_process(tmp_path: Path) -> None:
     out = tmp_path / "osc.npz"
     done = subprocess.run([*COSIM, "run", str(OSCILLATOR), "--stop", "0.1", "--output", str(out), "--inprocess",
