@@ -4,7 +4,7 @@
 
 The request: an integrator subsim of size 6 (configured with y0 = zeros), interval [0, 0.4] with 5
 samples, a 5x6 input segment, linear interpolation. ``run_interval`` commits nothing, so the same
-request is repeated. Six ways, interleaved in rounds so that load drifts hit all of them alike:
+request is repeated. Eight ways, interleaved in rounds so that load drifts hit all of them alike:
 
   (a) remote   RemoteHandle -> Zenoh -> a spawned ``python -m subsims.integrator`` (cosim.launch.Bus)
   (b) inproc   InProcessHandle: the same Runtime called directly
@@ -103,7 +103,7 @@ def benchmark_request() -> bytes:
 
 
 def lean_request() -> bytes:
-    """What (g) sends each call: the same msgpack body as :func:`benchmark_request`, packed without the codec."""
+    """What (g) sends each call: the same msgpack body as :func:`benchmark_request`, packed straight from the arrays."""
     args = {"t": encode_array(TIMES), "inputs": {k: encode_array(v) for k, v in INPUTS.items()}, "interp": "linear"}
     return pack({"v": PROTOCOL_VERSION, "cmd": "run_interval", "args": args})
 
@@ -152,7 +152,7 @@ def serve_bare(endpoint: str, run: str, reply_size: int, name: str = "bare", mod
     opener = sealer(parse_key(os.environ[SECRET_ENV])) if lean else None
     checked = None
     loop = loop_like_answer() if mode == "loop" else 0
-    security = ClientSecurity.from_env()  # the run's login (the bare responder seals nothing)
+    security = ClientSecurity.from_env()  # the run's login (only the lean modes seal)
     replying: list[tuple[int, int]] = []  # per request: ns in query.reply, ns dropping the query (its final message)
     with zenoh.open(client_config(endpoint, 10.0, security=security)) as session:
         queryable = session.declare_queryable(bare_key(run, name), zenoh.handlers.FifoChannel(64))
