@@ -28,8 +28,8 @@ request is repeated. Eight ways, interleaved in rounds so that load drifts hit a
 Then the framework overhead ratio (a)/(c), split at (e): (e)/(c) is the subsim's own work in its place,
 (a)/(e) the rest (client side, seals, the serving thread's bookkeeping); (f)/(c) beside (e)/(c) tells
 whether that work costs by its CPU or by the code it touches (cold after every wait); (g)/(c) and (h)/(c)
-are the floor any Python design with these seals, this codec and this model would stand on, and (a)/(g) what the
-framework's plumbing costs above it; (a) once more against an
+are what a lean Python path with these seals, this codec and this model costs (the floor under the framework), and
+(a)/(g) what the framework's plumbing costs above it; (a) once more against an
 integrator process that times its own ``answer()`` (server work vs transport) and each phase of its serving path
 around it (tag check, answer, seal, reply), beside the bare responder (e)'s reply after the same work; and where the
 framework's time goes: the CPU time of each stage of the request path, in this process. Prints
@@ -500,10 +500,10 @@ def main(argv: list[str] | None = None) -> int:
         f"(+{pct(rf, 50) - pct(rc, 50):.1f} us, against +{pct(re, 50) - pct(rc, 50):.1f} us for answer())"
     )
     print(
-        f"  the floor of any Python design with these seals, msgpack and this model (g)/(c): "
+        f"  a lean Python path with these seals, msgpack and this model (g)/(c): "
         f"{pct(rg, 50) / pct(rc, 50):.2f}x (+{pct(rg, 50) - pct(rc, 50):.1f} us); without the model, (h)/(c): "
         f"{pct(rh, 50) / pct(rc, 50):.2f}x (+{pct(rh, 50) - pct(rc, 50):.1f} us); the framework's plumbing above "
-        f"that floor (schema and runtime checks, handles, serving thread, replay window), (a)/(g): "
+        f"that path (schema and runtime checks, handles, serving thread, replay window), (a)/(g): "
         f"{pct(ra, 50) / pct(rg, 50):.2f}x (+{pct(ra, 50) - pct(rg, 50):.1f} us)"
     )
     print()
