@@ -171,8 +171,9 @@ def serve_bare(endpoint: str, run: str, reply_size: int, name: str = "bare", mod
                         medians = [statistics.median(x) / 1e3 for x in zip(*replying)] if replying else []
                         query.reply(query.key_expr, json.dumps(medians).encode())
                         return 0
+                    sent = reply  # the fixed bytes, unless a lean mode answers this request itself
                     if payload != b"ping" and lean:
-                        reply = lean_answer(runtime, opener, payload, model=mode == "lean")
+                        sent = lean_answer(runtime, opener, payload, model=mode == "lean")
                     elif payload != b"ping" and runtime is not None:
                         result = answer(runtime, payload)
                         if checked is None:  # once: the work done must be the model's run, not an error reply
@@ -182,7 +183,7 @@ def serve_bare(endpoint: str, run: str, reply_size: int, name: str = "bare", mod
                     elif payload != b"ping" and loop:
                         busy_loop(loop)
                     t0 = time.perf_counter_ns()
-                    query.reply(query.key_expr, reply)
+                    query.reply(query.key_expr, sent)
                     t1 = time.perf_counter_ns()
                 t2 = time.perf_counter_ns()
                 if payload != b"ping":
