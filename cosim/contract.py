@@ -20,7 +20,7 @@ ERROR_CODES: dict[str, str] = {
     "bad_value": "a field is well formed but out of contract (wrong size, NaN/inf, bad parameter)",
     "not_configured": "the subsim must be configured first",
     "time_mismatch": "the request's start time is not the committed time",
-    "no_trial": "commit without a run_interval since the last commit/rollback/set_state",
+    "no_trial": "commit without a run_interval since the last commit or rollback",
     "stale_trial": "the latest trial did not start from the current committed state",
     "not_in_history": "rollback target time is not in the committed history",
     "model_error": "the model could not advance (e.g. a singularity); nothing committed changed",

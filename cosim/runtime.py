@@ -134,7 +134,10 @@ class Runtime:
     def configure(self, params: Mapping[str, Any], t0: float = 0.0) -> dict:
         """Fresh model instance from ``params``; the old configuration stays if this fails."""
         t0 = self._finite_float(t0, "t0")
-        model = self._new_model()
+        try:
+            model = self._new_model()
+        except Exception as exc:  # the constructor (or the copy of a prototype) of a model that did build once
+            raise _model_exception(type(self.model).__qualname__, exc) from None
         try:
             state = model.initial_state(resolve_params(model.params, params))
             inputs, outputs = as_ports(model.inputs), as_ports(model.outputs)

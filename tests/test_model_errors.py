@@ -5,13 +5,16 @@ from __future__ import annotations
 
 import subprocess
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from cosim import Port, Subsim
 from cosim.contract import SubsimError
 from cosim.handles import InProcessHandle
+from cosim.runtime import Runtime
 
 BUGGY = '''
 import numpy as np
@@ -108,3 +111,35 @@ def test_a_model_exception_changes_nothing_committed(project: Path, monkeypatch:
     after = h.get_state()
     assert (after.time, after.state.tobytes()) == (before.time, before.state.tobytes())
     assert h.status()["has_trial"] is False
+
+
+class _BuildsTwice(Subsim):
+    """Its constructor works for the runtime and the first configure, then raises (a model's bug)."""
+
+    inputs = {"u": Port(1)}
+    outputs = {"x": Port(1)}
+    built = 0
+
+    def __init__(self) -> None:
+        type(self).built += 1
+        if type(self).built > 2:
+            raise RuntimeError("out of licences")
+
+    def initial_state(self, params: dict) -> np.ndarray:
+        return np.array([float(params.get("x0", 1.0))])
+
+    def advance(self, state: np.ndarray, times: np.ndarray, u: Callable) -> tuple[dict, np.ndarray]:
+        return {"x": np.tile(state, (times.size, 1))}, state
+
+
+def test_an_exception_in_the_constructor_at_configure_is_the_models_and_changes_nothing() -> None:
+    _BuildsTwice.built = 0
+    h = InProcessHandle(Runtime(_BuildsTwice), "a")
+    h.configure({"x0": 3.0})
+    with pytest.raises(SubsimError) as err:
+        h.configure({"x0": 5.0})
+    assert err.value.code == "model_exception"
+    assert "_BuildsTwice() raised RuntimeError: out of licences" in err.value.message
+    assert "in __init__" in err.value.traceback
+    state = h.get_state()
+    assert (state.time, state.state.tolist()) == (0.0, [3.0])

@@ -187,3 +187,23 @@ def test_the_gate_accepts_each_sequence_number_once_within_the_window() -> None:
     assert not answered(base + 12 - REPLAY_WINDOW)  # too far below the highest accepted
     assert gate.admit(seal_request(bytes(32), base + 99, encode_request("status"))) == (None, None)  # wrong key
     assert gate.counts["replayed"] == 4 and gate.counts["dropped"] == 1
+
+
+def test_a_replay_is_dropped_before_its_size_is_looked_at() -> None:
+    """A replayed frame gets nothing, not even the ``too_large`` (or ``busy``) reply a fresh one would get:
+    the replay check comes first, where the frame is received."""
+    from cosim.protocol.service import Gate
+    from cosim.runtime import Runtime
+    from subsims.integrator.subsim import Integrator
+
+    key = bytes(range(32))
+    gate = Gate(Runtime(Integrator), key, max_request=64)
+    frame = seal_request(key, 10**15, encode_request("status") + b"\0" * 100)  # over the cap of 64
+    admitted, reply = gate.admit(frame)
+    assert admitted is None and reply is not None and b"too_large" in reply
+    assert gate.admit(frame) == (None, None)
+    small = seal_request(key, 10**15 + 1, encode_request("status"))
+    admitted, reply = gate.admit(small)
+    assert admitted is not None and reply is None
+    assert gate.admit(small) == (None, None)  # queued once; a replay never reaches the queue
+    assert gate.counts["replayed"] == 2 and gate.counts["too_large"] == 1 and gate.counts["admitted"] == 1

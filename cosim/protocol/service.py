@@ -1,8 +1,8 @@
 """One request payload in, one reply payload out, for one runtime: the subsim side without a transport.
 
 Any transport (Zenoh here; a test, a pipe, another bus) serves a subsim by calling :func:`answer`,
-or, for sealed frames from a bus, through a :class:`Gate`: size cap and tag check where the transport
-receives (cheap, nothing decoded), replay check and :func:`answer` on the serving thread.
+or, for sealed frames from a bus, through a :class:`Gate`: tag, replay and size checks where the transport
+receives (cheap, nothing decoded), :func:`answer` on the serving thread.
 """
 
 from __future__ import annotations
@@ -68,11 +68,11 @@ class Admitted(NamedTuple):  # a tuple: a fraction of a frozen dataclass's cost,
 class Gate:
     """The subsim's door for sealed frames (docs/protocol.md 4.1).
 
-    :meth:`admit` runs where the transport receives, must never block and decodes nothing: a frame over
-    the cap gets a ``too_large`` reply, a frame without this subsim's tag is dropped without a word.
-    :meth:`answer` runs on the serving thread, in arrival order: a sequence number accepted before, or
-    more than ``REPLAY_WINDOW`` below the highest accepted, is a replay and is dropped; anything else
-    is decoded and answered. ``key=None`` turns
+    :meth:`admit` runs where the transport receives, one frame at a time in arrival order, must never block
+    and decodes nothing: a frame without this subsim's tag is dropped without a word, and so is a replay (a
+    sequence number accepted before, or ``REPLAY_WINDOW`` or more below the highest accepted), before its
+    size is looked at or a queue could answer it ``busy``; a frame over the cap gets a ``too_large`` reply.
+    :meth:`answer` decodes and answers an admitted request on the serving thread. ``key=None`` turns
     sealing off (frames are bare request bodies), for transports that authenticate otherwise.
     ``counts`` tallies what happened (admitted, dropped, replayed, too_large, busy).
     """
@@ -105,6 +105,9 @@ class Gate:
                 self.counts["dropped"] += 1
                 return None, None
             seq, body = opened
+            if not self._fresh(seq):
+                self.counts["replayed"] += 1
+                return None, None
         cap = self.cap
         if len(body) > cap:
             self.counts["too_large"] += 1
@@ -113,14 +116,11 @@ class Gate:
         self.counts["admitted"] += 1
         return Admitted(seq, body), None
 
-    def answer(self, request: Admitted) -> bytes | None:
-        """The sealed reply, or ``None`` for a replayed request (dropped)."""
+    def answer(self, request: Admitted) -> bytes:
+        """The (sealed) reply to an admitted request."""
         seq, body = request
         if self._sealer is None:
             return answer(self.runtime, body)
-        if not self._fresh(seq):
-            self.counts["replayed"] += 1
-            return None
         return self._sealer.seal_reply(seq, answer(self.runtime, body))
 
     def _fresh(self, seq: int) -> bool:

@@ -3,7 +3,7 @@
 Commands are handled one at a time, in arrival order, so the model and its state are only ever
 touched by one thread at a time. Queries arrive on zenoh-python's callback thread, which checks
 them without blocking: it answers queries that are not exactly this subsim's key (wildcards) with
-nothing, drops frames without this subsim's tag, refuses oversized ones (``too_large``) and, when
+nothing, drops frames without this subsim's tag and replays, refuses oversized ones (``too_large``) and, when
 ``queue_size`` requests are already waiting, answers ``busy``. A flood therefore never stalls
 Zenoh's receive path (which would cost the subsim its link) and never reaches the model.
 
@@ -119,8 +119,7 @@ class CommandServer:
                     self._last_run = time.perf_counter() - started
                 elif cmd == "configure":  # perhaps another model now: its speed is not known
                     self._last_run = float("inf")
-                if reply is not None:
-                    query.reply(key_expr, reply)
+                query.reply(key_expr, reply)
         finally:
             with self._ready:
                 self._busy = False
