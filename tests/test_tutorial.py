@@ -53,8 +53,8 @@ def exact(t: np.ndarray) -> np.ndarray:
     return np.array([expm(a * ti) @ np.array([0.0, 0.0, 0.1, 0.0]) for ti in t])
 
 
-def check_results(work: Path) -> None:
-    cols, data = read_results(work / "results" / "twomass-distributed.csv")
+def check_results(work: Path, name: str = "twomass-distributed.csv") -> None:
+    cols, data = read_results(work / "results" / name)
     assert cols == ["time", "wall.x[0]", "wall.v[0]", "free.x[0]", "free.F[0]"]
     assert data[-1, 0] == pytest.approx(2.0)
     z = exact(data[:, 0])
@@ -103,7 +103,6 @@ def test_the_tutorial_runs_as_written(tmp_path: Path) -> None:
                     if line.startswith("cosim plot"):
                         assert (work / "plots" / "wall.x.png").stat().st_size > 0
             elif kind == "run" and arg == "terminal 1":
-                (work / "results" / "twomass-distributed.csv").unlink()
                 coordinator = subprocess.Popen(body.strip().replace("7447", port), shell=True, cwd=work, env=env,
                                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
                 background.append(coordinator)
@@ -121,7 +120,9 @@ def test_the_tutorial_runs_as_written(tmp_path: Path) -> None:
                 out, err = coordinator.communicate(timeout=600)
                 assert coordinator.returncode == 0, err
                 assert second.wait(timeout=60) == 0  # the coordinator's shutdown ends it
-                check_results(work)
+                check_results(work, "twomass-remote.csv")
+                remote, local = (work / "results" / f"twomass-{n}.csv" for n in ("remote", "distributed"))
+                assert remote.read_bytes() == local.read_bytes()  # "the same results"
                 done.append("terminal 2")
             else:
                 assert kind == "figure", f"unknown marker {marker!r}"
