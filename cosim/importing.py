@@ -11,6 +11,7 @@ from __future__ import annotations
 import importlib
 import os
 import sys
+import traceback
 from pathlib import Path
 from typing import Any
 
@@ -36,9 +37,25 @@ def import_object(path: str, what: str) -> Any:
     if not sep or not module_name or not attr:
         raise ValueError(f"{what} {path!r} must be 'package.module:name'")
     try:
-        return getattr(importlib.import_module(module_name), attr)
-    except (ImportError, AttributeError) as exc:
+        module = importlib.import_module(module_name)
+    except ImportError as exc:
         raise ValueError(f"{what} {path!r} not found ({exc})") from None
+    except Exception as exc:  # the module itself is broken (a syntax error, a NameError at import): say where
+        raise ValueError(f"{what} {path!r}: importing {module_name!r} raised {_where(exc)}") from None
+    try:
+        return getattr(module, attr)
+    except AttributeError as exc:
+        raise ValueError(f"{what} {path!r} not found ({exc})") from None
+
+
+def _where(exc: Exception) -> str:
+    """``Type: message`` of an exception raised while importing a user's module, with the file and line it
+    came from (a SyntaxError names them in its message already)."""
+    if isinstance(exc, SyntaxError):
+        return f"{type(exc).__name__}: {exc}"
+    frames = traceback.extract_tb(exc.__traceback__)
+    last = frames[-1] if frames else None
+    return f"{type(exc).__name__}: {exc}" + (f" ({last.filename}, line {last.lineno})" if last else "")
 
 
 def load_model(path: str) -> type[Subsim]:

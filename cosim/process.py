@@ -39,10 +39,12 @@ def _raise_stop(signum: int, frame: object) -> None:
     raise _Stop(signal.Signals(signum).name)
 
 
-def parse_args(model_cls: type[Subsim] | Subsim, argv: Sequence[str] | None) -> argparse.Namespace:
+def parse_args(model_cls: type[Subsim] | Subsim, argv: Sequence[str] | None,
+               prog: str | None = None) -> argparse.Namespace:
+    """``prog``: how the process was started, for usage and error lines (default: ``python -m <package>``)."""
     model_cls = model_cls if isinstance(model_cls, type) else type(model_cls)  # a class or a prototype instance
     p = argparse.ArgumentParser(
-        prog=f"python -m {model_cls.__module__.rsplit('.', 1)[0]}",
+        prog=prog or f"python -m {model_cls.__module__.rsplit('.', 1)[0]}",
         description=f"Serve the {model_cls.__name__} subsim over Zenoh.",
     )
     p.add_argument("--connect", required=True, help="coordinator endpoint, e.g. tcp/127.0.0.1:7447")
@@ -96,8 +98,8 @@ def _watch_router(session: zenoh.Session, grace: float = 2.0) -> None:
             return
 
 
-def main(model_cls: type[Subsim] | Subsim, argv: Sequence[str] | None = None) -> int:
-    args = parse_args(model_cls, argv)
+def main(model_cls: type[Subsim] | Subsim, argv: Sequence[str] | None = None, prog: str | None = None) -> int:
+    args = parse_args(model_cls, argv, prog)
     signal.signal(signal.SIGTERM, _raise_stop)
     signal.signal(signal.SIGINT, _raise_stop)
     try:

@@ -29,12 +29,15 @@ class _Trial(NamedTuple):  # one per run_interval: a tuple costs a fraction of a
     end_state: np.ndarray
 
 
-def _model_exception(where: str, exc: BaseException) -> CosimError:
-    """A model's unexpected exception as an error that names it in one line and carries the model's own frames
-    (the runtime's frame that called the model is left out)."""
+def _model_frames(exc: BaseException) -> str:
+    """The traceback of an exception raised by a model: its own frames (the runtime's frame that called it left out)."""
     tb = exc.__traceback__.tb_next if exc.__traceback__ is not None else None
-    text = "".join(traceback.format_exception(type(exc), exc, tb))
-    return CosimError("model_exception", f"{where}() raised {type(exc).__name__}: {exc}", text)
+    return "".join(traceback.format_exception(type(exc), exc, tb))
+
+
+def _model_exception(where: str, exc: BaseException) -> CosimError:
+    """A model's unexpected exception as an error that names it in one line and carries the model's own frames."""
+    return CosimError("model_exception", f"{where}() raised {type(exc).__name__}: {exc}", _model_frames(exc))
 
 
 def _readonly(a: np.ndarray) -> np.ndarray:
@@ -139,12 +142,19 @@ class Runtime:
         except Exception as exc:  # the constructor (or the copy of a prototype) of a model that did build once
             raise _model_exception(type(self.model).__qualname__, exc) from None
         try:
-            state = model.initial_state(resolve_params(model.params, params))
+            resolved = resolve_params(model.params, params)
+        except ValueError as exc:
+            raise CosimError("bad_value", f"configure: bad parameter: {exc}") from None
+        try:
+            state = model.initial_state(resolved)
             inputs, outputs = as_ports(model.inputs), as_ports(model.outputs)
         except ModelError as exc:
             raise CosimError("model_error", f"configure: {exc}") from None
-        except (ValueError, KeyError, TypeError) as exc:
+        except ValueError as exc:  # the model refusing a parameter, as the contract asks
             raise CosimError("bad_value", f"configure: bad parameter: {exc}") from None
+        except (KeyError, TypeError) as exc:  # a refusal too, or a bug in initial_state (a KeyError 'K'): its frames say
+            raise CosimError("bad_value", f"configure: bad parameter (or a bug in initial_state()): "
+                                          f"{type(exc).__name__}: {exc}", _model_frames(exc)) from None
         except Exception as exc:
             raise _model_exception("initial_state", exc) from None
         state = self._check_state(state, None, "initial_state() for these parameters gave a state that")
@@ -279,8 +289,8 @@ class Runtime:
 
     @staticmethod
     def _check_state(state: Any, size: int | None, what: str, from_model: bool = False) -> np.ndarray:
-        """``from_model``: a state ``advance()`` returned. Its faults are not the caller's: a wrong shape
-        breaks the model contract (``internal``), anything else is ``model_error``."""
+        """``from_model``: a state ``advance()`` returned. Its faults are not the caller's but the model's:
+        ``model_error``."""
         bad = "model_error" if from_model else "bad_value"
         try:
             s = np.asarray(state, dtype=np.float64)
@@ -288,7 +298,7 @@ class Runtime:
             raise CosimError(bad, f"{what} is not a float vector") from None
         if s.ndim != 1 or (size is not None and s.size != size):
             want = f"({size},)" if size is not None else "1-D"
-            raise CosimError("internal" if from_model else "bad_value", f"{what} must have shape {want}, got {s.shape}")
+            raise CosimError(bad, f"{what} must have shape {want}, got {s.shape}")
         if not np.isfinite(s).all():
             raise CosimError(bad, f"{what} contains NaN or inf")
         return _readonly(s)
@@ -337,17 +347,17 @@ class Runtime:
 
     def _check_outputs(self, outputs: Mapping[str, Any], times: np.ndarray) -> dict[str, np.ndarray]:
         if type(outputs) is not dict and not isinstance(outputs, Mapping):  # (the common case without the ABC check)
-            raise CosimError("internal", f"advance() must return a map of outputs, got {type(outputs).__name__}")
+            raise CosimError("model_error", f"advance() must return a map of outputs, got {type(outputs).__name__}")
         checked = {}
         for name, port in self.outputs.items():
             if name not in outputs:
-                raise CosimError("internal", f"advance() did not return output {name!r}")
+                raise CosimError("model_error", f"advance() did not return output {name!r}")
             v = np.asarray(outputs[name], dtype=np.float64)
             if v.ndim == 1 and port.size == 1:
                 v = v.reshape(-1, 1)
             if v.shape != (times.size, port.size):
                 raise CosimError(
-                    "internal", f"advance() output {name!r} has shape {v.shape}, expected ({times.size}, {port.size})"
+                    "model_error", f"advance() output {name!r} has shape {v.shape}, expected ({times.size}, {port.size})"
                 )
             checked[name] = v
         together = np.concatenate(list(checked.values()), axis=1) if len(checked) > 1 else None
@@ -355,5 +365,5 @@ class Runtime:
             for name, v in checked.items():
                 if not np.isfinite(v).all():
                     i = int(np.argwhere(~np.isfinite(v))[0][0])
-                    raise CosimError("model_error", f"output {name!r} is not finite at t={times[i]!r}")
+                    raise CosimError("model_error", f"output {name!r} is not finite at t = {float(times[i])!r}")
         return checked

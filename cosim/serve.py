@@ -23,7 +23,7 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as exc:
         print(f"cosim.serve: {exc}", file=sys.stderr)
         return 2
-    return serve_model(cls, argv[1:])
+    return serve_model(cls, argv[1:], prog=f"python -m cosim.serve {argv[0]}")
 
 
 if __name__ == "__main__":

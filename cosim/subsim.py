@@ -75,7 +75,8 @@ def resolve_params(declared: Mapping[str, Param], given: Mapping[str, Any]) -> d
     """The parameters a model's ``initial_state`` sees: ``given`` over the declared defaults.
 
     A model that declares no parameters takes ``given`` as it is. Otherwise a name it does not
-    declare is refused (ValueError listing the known names, with a "did you mean" when one is close).
+    declare is refused (ValueError listing the known names, with a "did you mean" when one is close),
+    and so is a string where the default is a number or a boolean.
     """
     if not declared:
         return dict(given)
@@ -86,6 +87,12 @@ def resolve_params(declared: Mapping[str, Param], given: Mapping[str, Any]) -> d
             close = difflib.get_close_matches(str(k), list(declared), n=1)
             hints.append(f"{k!r} (did you mean {close[0]!r}?)" if close else repr(k))
         raise ValueError(f"unknown parameter(s) {', '.join(hints)}; this model takes: {', '.join(declared)}")
+    for k, v in given.items():  # a number in quotes would otherwise fail deep inside the model
+        default = declared[k].default
+        if isinstance(v, str) and isinstance(default, (bool, int, float)):
+            kind = "true or false" if isinstance(default, bool) else "a number"
+            raise ValueError(f"parameter {k!r} must be {kind} (its default is {default!r}), got the string {v!r}; "
+                             "write it without quotes")
     return {**{k: p.default for k, p in declared.items()}, **given}
 
 

@@ -175,7 +175,7 @@ def test_commands_before_configure_are_refused() -> None:
     assert err.value.code == "not_configured"
 
 
-@pytest.mark.parametrize(("end_state", "code"), [(np.zeros(3), "internal"), (np.array([np.nan, 0.0]), "model_error"),
+@pytest.mark.parametrize(("end_state", "code"), [(np.zeros(3), "model_error"), (np.array([np.nan, 0.0]), "model_error"),
                                                  ("garbage", "model_error")])
 def test_a_bad_end_state_from_the_model_is_not_the_callers_fault(end_state, code: str) -> None:
     class Broken(Integrator):
@@ -192,3 +192,25 @@ def test_a_bad_end_state_from_the_model_is_not_the_callers_fault(end_state, code
     assert committed(h) == before
     with pytest.raises(SubsimError, match="no_trial|commit without"):
         h.commit()
+
+
+@pytest.mark.parametrize(("outputs", "message"), [
+    (lambda n: {}, "advance() did not return output 'y'"),
+    (lambda n: {"y": np.zeros((n - 1, 2))}, f"advance() output 'y' has shape ({N - 1}, 2), expected ({N}, 2)"),
+    (lambda n: [np.zeros((n, 2))], "advance() must return a map of outputs, got list"),
+    (lambda n: {"y": np.r_[np.zeros((n - 1, 2)), [[0.0, np.nan]]]}, f"output 'y' is not finite at t = {float(TIMES[-1])!r}"),
+])
+def test_outputs_that_break_the_contract_are_the_models_error_and_change_nothing(outputs, message: str) -> None:
+    """Not ``internal`` (which reads as a fault of cosim's): the model's, naming the output and what was wrong."""
+    class Broken(Integrator):
+        def advance(self, state, times, u):
+            _, end = super().advance(state, times, u)
+            return outputs(times.size), end
+
+    h = InProcessHandle(Broken(), name="broken")
+    h.configure({"size": 2})
+    before = committed(h)
+    with pytest.raises(SubsimError) as err:
+        h.run_interval(TIMES, ramp(TIMES))
+    assert (err.value.code, err.value.message) == ("model_error", message)
+    assert committed(h) == before

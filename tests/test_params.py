@@ -90,3 +90,19 @@ def test_a_scenario_typo_is_reported_as_the_scenario_page_says(tmp_path) -> None
     with pytest.raises(ScenarioError) as err:
         open_session(load(sc), inprocess=True).close()
     assert str(err.value) == f"{sc}: {shown}"
+
+
+class ReadsAMisspelledKey(Seen):
+    def initial_state(self, params):
+        return np.array([params["Gain"]])  # a bug: the declared name is "gain"
+
+
+def test_a_key_error_in_initial_state_is_a_bad_parameter_with_the_models_frames() -> None:
+    """A KeyError may be the model refusing a parameter (as the contract allows) or a bug in it: the error says
+    both, names the exception, and carries the model's traceback, which tells which."""
+    h = InProcessHandle(ReadsAMisspelledKey())
+    with pytest.raises(SubsimError) as err:
+        h.configure({})
+    assert err.value.code == "bad_value"
+    assert err.value.message == "configure: bad parameter (or a bug in initial_state()): KeyError: 'Gain'"
+    assert 'params["Gain"]' in err.value.traceback and "in initial_state" in err.value.traceback
