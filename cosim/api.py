@@ -69,8 +69,9 @@ class _Collect:
         for name, ports in interval.outputs.items():
             for port, v in ports.items():
                 self.signals.setdefault(f"{name}.{port}", []).append(v[:-1])
-        self.diag.append((len(self.diag) + 1, float(interval.t[0]), float(interval.t[-1]), interval.stages,
-                          interval.largest_residual, interval.wall_time, interval.halvings))
+        t0, t1 = float(interval.t[0]), float(interval.t[-1])
+        self.diag.append((len(self.diag) + 1, t0, t1, interval.stages, interval.largest_residual, interval.wall_time,
+                          interval.halvings, interval.restarts, t1 - t0, interval.error))
         self.last = interval
 
     def arrays(self) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, np.ndarray]]:
@@ -81,8 +82,8 @@ class _Collect:
         signals = {k: np.concatenate([*v, last.outputs[k.split(".", 1)[0]][k.split(".", 1)[1]][-1:]])
                    for k, v in self.signals.items()}
         columns = list(zip(*self.diag))
-        kinds = [int, float, float, int, float, float, int]
-        diag = {c: np.array(col, dtype=kind) for c, col, kind in zip(DIAG_COLUMNS, columns, kinds)}
+        kinds = [int, float, float, int, float, float, int, int, float, float]
+        diag = {c: np.array(col, dtype=kind) for c, col, kind in zip(DIAG_COLUMNS, columns, kinds, strict=True)}
         return t, signals, diag
 
 

@@ -152,7 +152,7 @@ class Runtime:
             raise CosimError("model_error", f"configure: {exc}") from None
         except ValueError as exc:  # the model refusing a parameter, as the contract asks
             raise CosimError("bad_value", f"configure: bad parameter: {exc}") from None
-        except (KeyError, TypeError) as exc:  # a refusal too, or a bug in initial_state (a KeyError 'K'): its frames say
+        except (KeyError, TypeError) as exc:  # a refusal too, or a bug (a KeyError 'K'): its frames tell which
             raise CosimError("bad_value", f"configure: bad parameter (or a bug in initial_state()): "
                                           f"{type(exc).__name__}: {exc}", _model_frames(exc)) from None
         except Exception as exc:
@@ -356,9 +356,8 @@ class Runtime:
             if v.ndim == 1 and port.size == 1:
                 v = v.reshape(-1, 1)
             if v.shape != (times.size, port.size):
-                raise CosimError(
-                    "model_error", f"advance() output {name!r} has shape {v.shape}, expected ({times.size}, {port.size})"
-                )
+                want = (times.size, port.size)
+                raise CosimError("model_error", f"advance() output {name!r} has shape {v.shape}, expected {want}")
             checked[name] = v
         together = np.concatenate(list(checked.values()), axis=1) if len(checked) > 1 else None
         if together is None or not np.isfinite(together).all():  # one check for all; then name the bad one

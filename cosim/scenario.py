@@ -44,7 +44,8 @@ KEYS: dict[str, dict[str, Key]] = {
         "name": Key("string", "file name without .toml", "", "scenario name; names the default result file"),
         "description": Key("string", '""', "", "one line shown by cosim describe"),
         "start": Key("number", "0.0", "s", "simulated start time; every subsim is configured at it"),
-        "stop": Key("number", "required", "s", "simulated stop time; whole intervals run until it is reached"),
+        "stop": Key("number", "required", "s", "simulated stop time; whole intervals run until one ends at or past it "
+                    "(with interval = 'auto' the last one is cut to end at it)"),
     },
     "subsims.<name>": {
         "model": Key("string", "required unless external", "",
@@ -74,7 +75,8 @@ KEYS: dict[str, dict[str, Key]] = {
                         "(cosim/coupler/interval_control.py)"),
         "interval_tol": Key("number", "1e-8", "1",
                             "interval = 'auto': largest estimated interpolation error of every coupled input "
-                            "between its samples, relative to that channel's largest magnitude over the interval; "
+                            "between its samples, relative to that channel's largest magnitude so far in the run "
+                            "(never below res); "
                             "a larger estimate rolls the interval back and retries it shorter (an interval at "
                             "interval_min is accepted, its ratio in the diagnostics' error column)"),
         "interval_initial": Key("number", "0.1", "s", "interval = 'auto': length of the first interval"),
@@ -91,7 +93,9 @@ KEYS: dict[str, dict[str, Key]] = {
         "res": Key("number", "1e-12", "signal unit", "absolute convergence tolerance"),
         "max_stages": Key("integer", "100", "", "stages before an interval counts as not converged"),
         "order": Key("list of strings", "derived", "", "distributed execution order; every subsim once"),
-        "max_halvings": Key("integer", "0", "", "times a non-converging interval is retried on its first half"),
+        "max_halvings": Key("integer", "0", "", "times a non-converging interval is retried shorter: on its "
+                            "first half, then its first quarter, ...; not used with interval = 'auto', which "
+                            "shortens intervals itself"),
         "speculate": Key("boolean", "false", "",
                          "distributed: from stage 1 on, run a group beside the one before it on that one's previous "
                          "outputs, kept when they come back bit for bit the same (fewer round trips, same results)"),
@@ -224,7 +228,7 @@ def parse(raw: Mapping[str, Any], path: Path) -> Scenario:
     couplings = tuple(p.coupling(i, c, subsims) for i, c in enumerate(p.list_of_tables(raw, "couplings")))
     settings, default_method = p.settings(p.table(raw, "coupling"), p.tolerances(p.table(raw, "tolerances")), subsims)
     out_path, signals = p.output(p.table(raw, "output"))
-    return Scenario(path, str(raw.get("name", path.stem)), str(raw.get("description", "")), start, stop,
+    return Scenario(path, p.string(raw, "name", path.stem), p.string(raw, "description", ""), start, stop,
                     MappingProxyType(subsims), couplings, MappingProxyType(settings), default_method, out_path,
                     signals, p.unified(p.table(raw, "unified")), p.run(p.table(raw, "run")),
                     p.security(p.table(raw, "security")),
@@ -256,6 +260,12 @@ class _Parser:
         if isinstance(v, bool) or not isinstance(v, (int, float)):
             raise self.fail(f"{where}.{key}" if where else key, f"must be a number, got {v!r}")
         return float(v)
+
+    def string(self, table: Mapping, key: str, default: str, where: str = "") -> str:
+        v = table.get(key, default)
+        if not isinstance(v, str):
+            raise self.fail(f"{where}.{key}" if where else key, f"must be a string, got {v!r}")
+        return v
 
     def table(self, raw: Mapping, key: str, where: str | None = None) -> Mapping[str, Any]:
         value = raw.get(key, {})
@@ -289,6 +299,7 @@ class _Parser:
             if short in spec:
                 spec = expander.load()(spec, self.path, self.start, key)
         self.known(spec, set(KEYS["subsims.<name>"]), key)
+        self.string(spec, "doc", "", key)
         external = spec.get("external", False)
         if not isinstance(external, bool):
             raise self.fail(f"{key}.external", "must be true or false")
@@ -315,6 +326,11 @@ class _Parser:
         for required in ("to", "from"):
             if required not in c:
                 raise self.fail(key, f"missing {required!r}")
+        self.string(c, "to", "", key)
+        self.string(c, "doc", "", key)
+        sources = c["from"] if isinstance(c["from"], list) else [c["from"]]
+        if not sources or not all(isinstance(src, str) for src in sources):
+            raise self.fail(f"{key}.from", f"must be a 'subsim.port' string or a list of them, got {c['from']!r}")
         try:
             coupling = Coupling.make(c["to"], c["from"], c.get("transform", "identity"), c.get("params", {}))
         except (ValueError, TypeError) as exc:
@@ -366,6 +382,8 @@ class _Parser:
             if order is not None:
                 merged["order"] = check_order(order, list(subsims))
             return Settings(tol=tol, tolerances=MappingProxyType(dict(tolerances)), **{**merged, "method": method})
+        except ScenarioError:
+            raise
         except (ValueError, TypeError) as exc:
             raise self.fail(where, str(exc)) from None
 
@@ -388,7 +406,7 @@ class _Parser:
 
     def output(self, table: Mapping[str, Any]) -> tuple[Path | None, tuple[str, ...] | None]:
         self.known(table, set(KEYS["output"]), "output")
-        out_path = Path(table["path"]) if "path" in table else None
+        out_path = Path(self.string(table, "path", "", "output")) if "path" in table else None
         if out_path is not None and not out_path.is_absolute():
             out_path = Path.cwd() / out_path
         signals = table.get("signals")

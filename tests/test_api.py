@@ -45,6 +45,9 @@ def test_run_returns_the_cli_results_bit_for_bit(tmp_path: Path, method: str) ->
     assert r["mass1.u"].shape == (data.shape[0], 1)
     assert same_bits(r.diagnostics["stages"].astype(float), diag[:, 3])
     assert same_bits(r.diagnostics["t1"], diag[:, 2]) and r.summary.intervals == diag.shape[0] == 6
+    assert list(r.diagnostics) == DIAG_COLUMNS  # every column of the .diag.csv, as documented
+    for name in ("halvings", "restarts", "length_s"):  # written exactly; largest_residual and error are rounded
+        assert same_bits(r.diagnostics[name].astype(float), diag[:, DIAG_COLUMNS.index(name)]), name
     assert r.order == ["mass1", "mass2"] and r.feedback == ["mass2.u -> mass1.F"]
 
 

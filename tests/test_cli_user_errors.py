@@ -64,11 +64,13 @@ def test_a_broken_model_module_is_one_line_naming_its_file_and_line(tmp_path: Pa
     """A syntax error or a failing top-level statement in the user's module: not cosim's traceback through importlib."""
     (tmp_path / "broken.py").write_text(source)
     sc = tmp_path / "s.toml"
-    sc.write_text(OSCILLATOR.read_text().replace('model = "subsims.oscillator.subsim:Mass"', 'model = "broken:Broken"', 1))
+    mass = 'model = "subsims.oscillator.subsim:Mass"'
+    sc.write_text(OSCILLATOR.read_text().replace(mass, 'model = "broken:Broken"', 1))
     for command in (["run", str(sc), "--inprocess", "--quiet", "--output", str(tmp_path / "x.csv")],
                     ["describe", str(sc)]):
         done = subprocess.run([*COSIM, *command], capture_output=True, text=True, timeout=120, cwd=tmp_path)
         assert done.returncode == 2, done.stderr
         lines = done.stderr.strip().splitlines()
         assert len(lines) == 1 and lines[0].startswith("cosim: ") and "Traceback" not in done.stderr, done.stderr
-        assert "model 'broken:Broken': importing 'broken' raised" in lines[0] and all(w in lines[0] for w in words), lines[0]
+        assert "model 'broken:Broken': importing 'broken' raised" in lines[0], lines[0]
+        assert all(w in lines[0] for w in words), lines[0]

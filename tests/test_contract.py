@@ -198,7 +198,8 @@ def test_a_bad_end_state_from_the_model_is_not_the_callers_fault(end_state, code
     (lambda n: {}, "advance() did not return output 'y'"),
     (lambda n: {"y": np.zeros((n - 1, 2))}, f"advance() output 'y' has shape ({N - 1}, 2), expected ({N}, 2)"),
     (lambda n: [np.zeros((n, 2))], "advance() must return a map of outputs, got list"),
-    (lambda n: {"y": np.r_[np.zeros((n - 1, 2)), [[0.0, np.nan]]]}, f"output 'y' is not finite at t = {float(TIMES[-1])!r}"),
+    (lambda n: {"y": np.r_[np.zeros((n - 1, 2)), [[0.0, np.nan]]]},
+     f"output 'y' is not finite at t = {float(TIMES[-1])!r}"),
 ])
 def test_outputs_that_break_the_contract_are_the_models_error_and_change_nothing(outputs, message: str) -> None:
     """Not ``internal`` (which reads as a fault of cosim's): the model's, naming the output and what was wrong."""

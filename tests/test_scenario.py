@@ -65,6 +65,17 @@ def test_good_scenario_loads_with_per_method_settings(tmp_path: Path) -> None:
         ("stop = 1.0", "stop = -1.0", "stop", "after start"),
         ("stop = 1.0", 'stop = 1.0\n[unified]\nfuncton = "m:f"', "unified", "unknown key(s) ['funct"),
         ('[subsims.b]\nmodel = "subsims.integrator.subsim:Integrator"', "[subsims.b]", "subsims.b", "needs model"),
+        # values of the wrong type: refused by key, never a bare TypeError or AttributeError
+        ('to = "b.u"', "to = 3", "couplings[1].to", "must be a string, got 3"),
+        ('from = ["a.y"]', 'from = ["a.y", 4]', "couplings[1].from", "must be a 'subsim.port' string or a list"),
+        ('to = "b.u"', 'to = "b.u"\ndoc = 3', "couplings[1].doc", "must be a string"),
+        ("params = { size = 2 }", "params = { size = 2 }\ndoc = 3", "subsims.a.doc", "must be a string"),
+        ("stop = 1.0", "stop = 1.0\nname = 3", "name", "must be a string, got 3"),
+        ("stop = 1.0", "stop = 1.0\ndescription = true", "description", "must be a string, got True"),
+        ("stop = 1.0", "stop = 1.0\n[output]\npath = 3", "output.path", "must be a string, got 3"),
+        ("interval = 0.1", "interval = true", "coupling", "interval must be a positive number, got True"),
+        ("samples = 5", "samples = true", "coupling", "samples must be an integer >= 2, got True"),
+        ("interval = 0.1", "interval = 0.1\nmax_halvings = true", "coupling", "max_halvings must be an integer"),
     ],
 )
 def test_load_errors_name_the_key(tmp_path: Path, old: str, new: str, key: str, words: str) -> None:
@@ -72,6 +83,13 @@ def test_load_errors_name_the_key(tmp_path: Path, old: str, new: str, key: str, 
     with pytest.raises(ScenarioError) as err:
         load(write(tmp_path, GOOD.replace(old, new, 1)))
     assert f"[{key}]" in str(err.value) and words in str(err.value) and "s.toml" in str(err.value)
+    assert str(err.value).count("s.toml") == 1, str(err.value)  # one prefix: not wrapped twice
+
+
+def test_an_interval_key_without_auto_is_named_once(tmp_path: Path) -> None:
+    with pytest.raises(ScenarioError) as err:
+        load(write(tmp_path, GOOD.replace("interval = 0.1", "interval = 0.1\ninterval_tol = 1e-6", 1)))
+    assert str(err.value) == f"{tmp_path / 's.toml'}: [coupling] ['interval_tol'] need interval = \"auto\""
 
 
 @pytest.mark.parametrize(

@@ -22,6 +22,8 @@ class SignalRef:
 
     @classmethod
     def parse(cls, text: str) -> SignalRef:
+        if not isinstance(text, str):
+            raise ValueError(f"signal {text!r} must be a string 'subsim.port'")
         subsim, dot, port = text.partition(".")
         if not dot or not subsim or not port:
             raise ValueError(f"signal {text!r} must be written 'subsim.port'")

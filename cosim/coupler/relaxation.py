@@ -77,17 +77,19 @@ class Settings:
     def __post_init__(self) -> None:
         if self.method not in METHODS:
             raise ValueError(f"method must be one of {', '.join(METHODS)}, got {self.method!r}")
-        if not (isinstance(self.interval, (int, float)) and np.isfinite(self.interval) and self.interval > 0):
+        interval = self.interval
+        if isinstance(interval, bool) or not isinstance(interval, (int, float)) or not np.isfinite(interval) \
+                or interval <= 0:
             raise ValueError(f"interval must be a positive number, got {self.interval!r}")
-        if not isinstance(self.samples, int) or self.samples < 2:
+        if isinstance(self.samples, bool) or not isinstance(self.samples, int) or self.samples < 2:
             raise ValueError(f"samples must be an integer >= 2, got {self.samples!r}")
         if self.first_guess not in POLICIES:
             raise ValueError(f"first_guess must be one of {', '.join(POLICIES)}, got {self.first_guess!r}")
         if self.interp not in SCHEMES:
             raise ValueError(f"interp must be one of {', '.join(SCHEMES)}, got {self.interp!r}")
-        if not isinstance(self.max_stages, int) or self.max_stages < 2:
+        if isinstance(self.max_stages, bool) or not isinstance(self.max_stages, int) or self.max_stages < 2:
             raise ValueError(f"max_stages must be an integer >= 2, got {self.max_stages!r}")
-        if not isinstance(self.max_halvings, int) or self.max_halvings < 0:
+        if isinstance(self.max_halvings, bool) or not isinstance(self.max_halvings, int) or self.max_halvings < 0:
             raise ValueError(f"max_halvings must be an integer >= 0, got {self.max_halvings!r}")
         if not isinstance(self.speculate, bool):
             raise ValueError(f"speculate must be true or false, got {self.speculate!r}")
