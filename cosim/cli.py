@@ -8,8 +8,6 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-import zenoh
-
 from cosim import __version__, interrupt
 from cosim.contract import SubsimError
 from cosim.coupler.relaxation import METHODS, Interval, NotConverged
@@ -17,6 +15,7 @@ from cosim.outputs import OutputError, OutputWriteError
 from cosim.preflight import UsageError, check_listen, check_stop, zenoh_error_line
 from cosim.protocol.keys import check_name
 from cosim.protocol.security import Security
+from cosim.protocol.transport.session import BusError
 from cosim.runner import default_output, open_session, run_scenario
 from cosim.scenario import ScenarioError, load
 
@@ -251,7 +250,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (ScenarioError, OutputError, UsageError) as exc:
         print(f"cosim: {exc}", file=sys.stderr)
         return 2
-    except zenoh.ZError as exc:
+    except BusError as exc:
         line = zenoh_error_line(exc, getattr(args, "listen", ""))
         print(f"cosim: {line}", file=sys.stderr)
         return 2 if line.startswith("--listen") else 1

@@ -21,6 +21,10 @@ import zenoh
 from cosim.protocol.keys import alive_key, coordinator_alive_key, rpc_key
 from cosim.protocol.security import ClientSecurity, Security
 
+# The transport's own failure (a session that cannot open, a link refused), for the layers above that report it
+# without importing zenoh themselves.
+BusError = zenoh.ZError
+
 # All of zenoh's internal thread pools (app, rx, tx, acc, net) handed over to one thread. On a 2-core
 # machine this cut a small request/reply from 225 to 150 us and the CPU per request by about 40 %, since
 # fewer thread hand-offs and wake-ups sit on the path. Read once per process, at the first session open;
