@@ -297,8 +297,8 @@ class Coordinator:
                 if self.on_stage is not None:
                     self.on_stage(action.stage, action.outputs)
             elif isinstance(action, Rollback):
-                for h in self.handles.values():
-                    h.rollback()
+                for name in list(self.handles):  # a replacement is restored committed: rolled back already
+                    self._call_replacing(name, lambda h: h.rollback())
             elif isinstance(action, Commit):
                 self._uncommitted = set(self.handles)
                 action.interval.wall_time = time.perf_counter() - started
@@ -383,7 +383,7 @@ class Coordinator:
     def _checkpoint(self) -> None:
         """Every subsim's committed state now; the journal keeps only what a checkpoint does not cover."""
         self.commit_pending()
-        self._checkpoints = {name: h.get_state() for name, h in self.handles.items()}
+        self._checkpoints = {name: self._call_replacing(name, lambda h: h.get_state()) for name in list(self.handles)}
         oldest = min(cp.time for cp in self._checkpoints.values())
         self._journal = [entry for entry in self._journal if entry[0][0] >= oldest]
 
@@ -395,13 +395,31 @@ class Coordinator:
         if self._commits % self.recovery.checkpoint_every == 0:
             self._checkpoint()
 
+    def _call_replacing(self, name: str, call: Callable[[SubsimHandle], T]) -> T:
+        """``call(handle)`` outside a run (a checkpoint, a rollback); a subsim that died or hung meanwhile is
+        replaced, restored to its committed state, and asked again, as in a run."""
+        while True:
+            try:
+                return call(self.handles[name])
+            except Exception as exc:
+                if not _recoverable(exc) or self.recovery is None or len(self.restarts) >= self.recovery.restarts:
+                    raise
+                self._replace(name, exc)
+
     def _replace(self, name: str, why: Exception) -> None:
         """A new process for ``name`` at its last checkpoint, with every committed interval since replayed."""
         assert self.recovery is not None
         reason = f"{'died' if isinstance(why, SubsimDied) else 'hung'} ({why})"
         self.handles[name].close()
         handle = self.recovery.revive(name)
-        checkpoint = self._checkpoints[name]
+        checkpoint = self._checkpoints.get(name)
+        if checkpoint is None:  # dead before the first checkpoint, taken before the first interval: revive() made
+            self.handles[name] = handle  # it as it started, which is its committed state
+            at = float(handle.status()["time"])
+            self.restarts.append(Restart(name, at, reason, 0))
+            self.recovery.log(f"cosim: {name} {reason}; replaced ({len(self.restarts)} of {self.recovery.restarts}) "
+                              f"at its start, t = {at:g}")
+            return
         handle.set_state(checkpoint)
         replay = [(t, inputs[name]) for t, inputs in self._journal if t[0] >= checkpoint.time]
         for i, (t, inputs) in enumerate(replay):

@@ -76,7 +76,12 @@ class SubsimProcess:
     lease: float | None = None
 
     def stop(self, grace: float = 3.0) -> int:
-        """Ask for ``shutdown``, then SIGTERM, then SIGKILL; always reaps the process."""
+        """Ask for ``shutdown``, then SIGTERM, then SIGKILL; always reaps the process. One known to be hung
+        (it missed a deadline) is killed at once: a stopped process would let both graces run out."""
+        if self.popen.poll() is None and getattr(self.handle, "hung", False):
+            self.popen.kill()
+            self.handle.close()
+            return self.popen.wait()
         if self.popen.poll() is None and self.handle.alive:
             try:
                 self.handle.timeout = min(self.handle.timeout, grace)  # the handle is closed below anyway

@@ -15,6 +15,7 @@ import subprocess
 import sys
 import threading
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -167,6 +168,73 @@ def test_a_stopped_subsim_is_found_by_its_deadline_and_replaced(undisturbed: dic
         # that costs a replacement, never a different result)
         hung_b = [r for r in ring.coordinator.restarts if r.subsim == "b" and r.reason.startswith("hung")]
         assert len(hung_b) == 1, ring.log
+
+
+def kill_on_call(ring: Ring, victim: str, method: str, occurrence: int) -> None:
+    """Kill ``victim`` when its handle's ``method`` is called the ``occurrence``-th time (from 0), and wait until the
+    coordinator knows it is gone, then let the call go on: the call meets a dead process."""
+    handle = ring.handles[victim]
+    original, calls = getattr(handle, method), [0]
+
+    def call(*args, **kwargs):
+        calls[0] += 1
+        if calls[0] - 1 == occurrence:
+            kill(ring.pid(victim))
+            deadline = time.monotonic() + 10
+            while handle.alive and time.monotonic() < deadline:
+                time.sleep(0.005)
+        return original(*args, **kwargs)
+
+    setattr(handle, method, call)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("occurrence", [0, 1])  # the checkpoint before the first interval, the first periodic one
+def test_a_subsim_killed_at_a_checkpoint_is_replaced_and_the_results_are_bit_identical(
+    undisturbed: dict, occurrence: int
+) -> None:
+    with Bus.open() as bus:
+        ring = Ring(bus, "distributed")
+        kill_on_call(ring, "b", "get_state", occurrence)
+        assert ring.run() == undisturbed["distributed"]
+        assert [r.subsim for r in ring.coordinator.restarts] == ["b"], ring.log
+
+
+@pytest.mark.slow
+def test_a_subsim_killed_at_a_rollback_is_replaced_and_the_results_are_bit_identical(
+    monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Three stages are too few for the first 0.1 s interval: it is rolled back and halved three times (nine
+    rollbacks of the three subsims), and a subsim killed at its first rollback is replaced there."""
+    short = settings("distributed")
+    monkeypatch.setattr(sys.modules[__name__], "settings", lambda method: replace(short, max_stages=3, max_halvings=3))
+    with Bus.open() as bus:
+        calm = Ring(bus, "distributed")
+        calm_rollbacks = [0]
+        calm.handles["a"].rollback = lambda *a, _r=calm.handles["a"].rollback, **k: (
+            calm_rollbacks.__setitem__(0, calm_rollbacks[0] + 1), _r(*a, **k))[1]
+        expected = calm.run()
+    assert calm_rollbacks[0] == 3  # the interval was rolled back (else this test would test nothing)
+    with Bus.open() as bus:
+        ring = Ring(bus, "distributed")
+        kill_on_call(ring, "c", "rollback", 0)
+        assert ring.run() == expected
+        assert [r.subsim for r in ring.coordinator.restarts] == ["c"], ring.log
+
+
+@pytest.mark.slow
+def test_a_hung_subsim_is_killed_at_once_when_the_run_stops() -> None:
+    """A process found hung (stopped) is not asked to shut down nor given SIGTERM's grace: it is killed."""
+    with Bus.open() as bus:
+        ring = Ring(bus, "distributed", restarts=0)
+        ring.coordinator.deadline = Deadline(fixed=1.0)
+        ring.coordinator.on_stage = lambda stage, out: kill(ring.pid("b"), signal.SIGSTOP) if stage == 1 else None
+        with pytest.raises(SubsimHung):
+            ring.run()
+        (proc,) = [p for p in bus.processes if p.name == "b"]
+        started = time.monotonic()
+        assert proc.stop() == -signal.SIGKILL
+        assert time.monotonic() - started < 2.0  # not a 3 s shutdown grace and a 3 s SIGTERM grace
 
 
 @pytest.mark.slow

@@ -115,6 +115,7 @@ class RemoteHandle(SubsimHandle):
         self._key = rpc_key(run, name)
         self.timeout = timeout
         self.deadline: float | None = None
+        self.hung = False  # a request missed its deadline: the process is stuck or stopped (its stop need not ask)
         self._in_flight: set[_Pending] = set()
         # A declared querier costs about 35 us less per request than session.get; its timeout is fixed at
         # declaration. Zenoh keeps a task of about 1.1 KB per query for the query's whole timeout, however soon
@@ -237,6 +238,7 @@ class RemoteHandle(SubsimHandle):
     def _no_reply(self, cmd: str, pending: _Pending, deadline: float | None, forged: int) -> SubsimError:
         """Why the query ended without a genuine reply."""
         if pending.hung:
+            self.hung = True
             return SubsimHung("timeout", f"no reply within the {deadline:g} s deadline (hung or stopped?)",
                               self.name, cmd)
         if forged:
