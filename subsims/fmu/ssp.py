@@ -28,6 +28,7 @@ from cosim.scenario import ScenarioError
 
 MODEL = "subsims.fmu:FmuSubsim"
 FMU_TYPES = {"application/x-fmu-sharedlibrary", None}
+LAYOUT_ONLY = {"ConnectionGeometry", "Annotations"}  # children of a Connection that carry no coupling
 COMPANION_KEYS = {"name", "description", "start", "stop", "coupling", "tolerances", "output", "subsims"}
 
 
@@ -184,6 +185,8 @@ def read_ssp(path: str | Path) -> dict[str, Any]:
                 raise ScenarioError(f"{path}: connection {text}: system-level connectors are not supported")
             coupling: dict[str, Any] = {"to": f"{ends[2]}.{ends[3]}", "from": f"{ends[0]}.{ends[1]}"}
             for transform in conn:
+                if _local(transform.tag) in LAYOUT_ONLY:  # where an editor drew the line: nothing to couple
+                    continue
                 if _local(transform.tag) != "LinearTransformation":
                     raise ScenarioError(f"{path}: connection {text}: {_local(transform.tag)} is not supported")
                 try:
@@ -197,6 +200,9 @@ def read_ssp(path: str | Path) -> dict[str, Any]:
     raw = _with_companion(raw, path)
     if "stop" not in raw:
         raise ScenarioError(f"{path}: no stop time: give DefaultExperiment stopTime in the SSD or stop = ... in "
+                            f"{path.with_suffix('.toml').name} beside it")
+    if "interval" not in raw.get("coupling", {}):  # SSP has no communication step; a default one would be a guess
+        raise ScenarioError(f"{path}: no coupling interval: give [coupling] interval = ... (and samples) in "
                             f"{path.with_suffix('.toml').name} beside it")
     return raw
 

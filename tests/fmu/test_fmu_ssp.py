@@ -47,9 +47,13 @@ def component(name: str, bindings: str, source: str = "resources/mass.fmu",
             f"</ssd:Connectors><ssd:ParameterBindings>{bindings}</ssd:ParameterBindings></ssd:Component>")
 
 
-def connection(start: str, end: str, factor: float | None = K12) -> str:
+def connection(start: str, end: str, factor: float | None = K12, layout: bool = False) -> str:
+    """``layout``: with the drawing an SSP editor adds (a ConnectionGeometry and Annotations), which couple nothing."""
     (se, sc), (ee, ec) = start.split("."), end.split(".")
     inner = "" if factor is None else f'<ssc:LinearTransformation factor="{factor!r}" offset="0"/>'
+    if layout:
+        inner += ('<ssd:ConnectionGeometry pointsX="10 20" pointsY="5 5"/>'
+                  '<ssc:Annotations><ssc:Annotation type="com.example.editor"/></ssc:Annotations>')
     return (f'<ssd:Connection startElement="{se}" startConnector="{sc}" endElement="{ee}" endConnector="{ec}">'
             f"{inner}</ssd:Connection>")
 
@@ -59,7 +63,7 @@ def oscillator_ssd() -> str:
               "</ssd:ParameterValues></ssd:ParameterBinding>")
     from_file = '<ssd:ParameterBinding source="resources/mass2.ssv" prefix="mass2."/>'
     return ssd(component("mass1", inline) + component("mass2", from_file),
-               connection("mass2.u", "mass1.F") + connection("mass1.u", "mass2.F"))
+               connection("mass2.u", "mass1.F", layout=True) + connection("mass1.u", "mass2.F"))
 
 
 def write_ssp(path: Path, ssd_text: str | None, fmu: Path | None, extra: dict[str, str] | None = None) -> Path:
@@ -129,6 +133,7 @@ def test_cosim_run_ssp_gives_the_same_run_as_the_toml_scenario(
         ("system_connector", "connection None.u -> mass1.F: system-level connectors are not supported"),
         ("no_stop", "no stop time: give DefaultExperiment stopTime in the SSD or stop = ... in system.toml"),
         ("bad_companion", "system.toml: [subsims.mass9] is not a component of system.ssp"),
+        ("no_interval", "no coupling interval: give [coupling] interval = ... (and samples) in system.toml beside it"),
         ("missing_ssv", "parameter file 'resources/nope.ssv' is not in the archive"),
     ],
 )
@@ -143,6 +148,7 @@ def test_a_bad_ssp_is_one_clear_line(
         "system_connector": ssd(plain, '<ssd:Connection startConnector="u" endElement="mass1" endConnector="F"/>'),
         "no_stop": ssd(plain, "", experiment=""),
         "bad_companion": ssd(plain, ""),
+        "no_interval": ssd(plain, ""),
         "missing_ssv": ssd(component("mass1", '<ssd:ParameterBinding source="resources/nope.ssv"/>'), ""),
     }[case]
     ssp = write_ssp(tmp_path / "system.ssp", text, fmus["mass2"])
