@@ -55,6 +55,7 @@ class Session:
     plans: dict[str, Plan] = field(default_factory=dict)  # per method, checked once
     external_wait: float = 300.0
     timeout: float = 120.0
+    log: Log = _stderr
 
     def revive(self, name: str) -> SubsimHandle:
         """A new process for a subsim that died or hung, configured as at the run's start: a launched one is
@@ -62,7 +63,9 @@ class Session:
         if self.bus is None:
             raise ScenarioError(f"{self.scenario.path}: {name} failed in-process: nothing to restart")
         spec = self.scenario.subsims[name]
-        if spec.external:
+        if spec.external:  # nothing else is printed until it is back: say what is awaited, and from whom
+            self.log(f"cosim: external subsim {name!r} is gone; waiting up to {self.external_wait:g} s for it to "
+                     "attach again (start it with the same command and the same two variables)")
             handle: SubsimHandle = self.bus.attach(name, timeout=self.timeout, wait=self.external_wait)
         else:
             handle = self.bus.respawn(name, timeout=self.timeout).handle
@@ -104,7 +107,7 @@ def open_session(
             bus = Bus.open(listen, run=run_id, security=security or scenario.security)
         except (ValueError, RuntimeError) as exc:  # bad --listen or security files; port taken
             raise ScenarioError(f"cannot open the bus: {exc}") from None
-    session = Session(scenario, handles, {}, bus, external_wait=external_wait, timeout=timeout)
+    session = Session(scenario, handles, {}, bus, external_wait=external_wait, timeout=timeout, log=log)
     try:
         if bus is not None:
             for name, spec in scenario.subsims.items():

@@ -165,8 +165,10 @@ class RemoteHandle(SubsimHandle):
             )
             if any(r.ok is not None and self._open(seq, r.ok.payload.to_bytes()) is not None for r in replies):
                 return
-            if time.monotonic() > deadline:
-                raise SubsimError("no_responder", f"not answering after {timeout:g} s", self.name, "connect")
+            if time.monotonic() > deadline:  # its token is there, so it runs: a subsim drops what it cannot open
+                raise SubsimError("no_responder", f"its process is up but not answering after {timeout:g} s: "
+                                  "is it running with this run's COSIM_SECRET? (a subsim silently drops requests "
+                                  "sealed with another key)", self.name, "connect")
             time.sleep(0.01)
 
     def _begin(self, cmd: str, args: dict[str, Any]) -> Callable[[], dict]:
