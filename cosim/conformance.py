@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -281,7 +282,18 @@ def main(argv: Sequence[str] | None = None) -> int:
         check_name(args.name, "name")
     except ValueError as exc:
         p.error(str(exc))
-    with Bus.open(args.endpoint, run=args.run) as bus:
+    if not (math.isfinite(args.interval) and args.interval > 0):
+        p.error(f"--interval must be a finite number of seconds > 0, got {args.interval}")
+    if args.samples < 2:
+        p.error(f"--samples must be at least 2 (both ends of an interval), got {args.samples}")
+    if not (math.isfinite(args.wait) and args.wait > 0):
+        p.error(f"--wait must be a finite number of seconds > 0, got {args.wait}")
+    try:
+        bus = Bus.open(args.endpoint, run=args.run)
+    except (ValueError, RuntimeError) as exc:  # a malformed endpoint, a port in use
+        print(f"cosim.conformance: {exc}", file=sys.stderr)
+        return 2
+    with bus:
         print(f"cosim.conformance: listening on {bus.endpoint}, run {bus.run}; start the subsim with "
               f"--connect {bus.endpoint} --run {bus.run} --name {args.name}", file=sys.stderr, flush=True)
         env = " ".join(f"{k}={v}" for k, v in bus.subsim_env(args.name).items())

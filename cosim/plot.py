@@ -199,6 +199,11 @@ def plot_files(paths: Sequence[Path], out: Path, signals: Sequence[str] | None =
 
     ``window`` = (t0, t1) restricts the time axis (e.g. (40000, 60000) for the paper's figs. 8-16).
     """
+    if window is not None:
+        t0 = float("-inf") if window[0] is None else window[0]
+        t1 = float("inf") if window[1] is None else window[1]
+        if not (t0 < t1) or math.isnan(t0) or math.isnan(t1):
+            raise PlotError(f"--window {window[0]} {window[1]}: give a time span T0 < T1")
     _pyplot()
     results = [Result(Path(p)) for p in paths]
     if window is not None:

@@ -39,6 +39,26 @@ def _raise_stop(signum: int, frame: object) -> None:
     raise _Stop(signal.Signals(signum).name)
 
 
+def _seconds(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a number of seconds, got {text!r}") from None
+    if not 0 < value <= 86400:  # also refuses NaN; an endless wait could not be interrupted
+        raise argparse.ArgumentTypeError(f"must be a number of seconds > 0 and at most a day, got {text}")
+    return value
+
+
+def _count(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a whole number >= 0, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be a whole number >= 0, got {value}")
+    return value
+
+
 def parse_args(model_cls: type[Subsim] | Subsim, argv: Sequence[str] | None,
                prog: str | None = None) -> argparse.Namespace:
     """``prog``: how the process was started, for usage and error lines (default: ``python -m <package>``)."""
@@ -50,9 +70,10 @@ def parse_args(model_cls: type[Subsim] | Subsim, argv: Sequence[str] | None,
     p.add_argument("--connect", required=True, help="coordinator endpoint, e.g. tcp/127.0.0.1:7447")
     p.add_argument("--run", required=True, help="run id (namespaces every key)")
     p.add_argument("--name", default=model_cls.name, help=f"instance name on the bus (default: {model_cls.name})")
-    p.add_argument("--connect-timeout", type=float, default=10.0, help="seconds to wait for the coordinator")
-    p.add_argument("--history", type=int, default=DEFAULT_HISTORY, help="committed states kept for rollback")
-    p.add_argument("--lease", type=float, default=10.0, help="seconds a silent link to the coordinator lives")
+    p.add_argument("--connect-timeout", type=_seconds, default=10.0,
+                   help="seconds to wait for the coordinator (a signal during the wait ends the process after it)")
+    p.add_argument("--history", type=_count, default=DEFAULT_HISTORY, help="committed states kept for rollback")
+    p.add_argument("--lease", type=_seconds, default=10.0, help="seconds a silent link to the coordinator lives")
     p.add_argument("--quiet-stop", action="store_true",
                    help="say nothing when the coordinator ends the run (cosim run passes it to the subsims it "
                         "starts: it reports the stop itself, in one line)")
@@ -103,17 +124,18 @@ def main(model_cls: type[Subsim] | Subsim, argv: Sequence[str] | None = None, pr
     signal.signal(signal.SIGTERM, _raise_stop)
     signal.signal(signal.SIGINT, _raise_stop)
     try:
-        runtime = Runtime(model_cls, name=args.name, history_limit=args.history)
-        session = zenoh.open(client_config(args.connect, args.connect_timeout, int(args.lease * 1000),
-                                          security=args.security))
-    except zenoh.ZError as exc:
-        print(
-            f"{args.name}: cannot reach the coordinator at {args.connect} within {args.connect_timeout:g} s "
-            f"(or its login/TLS refused ours: check ${ZENOH_AUTH_ENV}/--auth-file and --tls-ca) ({exc})",
-            file=sys.stderr,
-        )
-        return 2
-    except _Stop as why:
+        try:  # zenoh.open holds the signals until it returns (within --connect-timeout)
+            runtime = Runtime(model_cls, name=args.name, history_limit=args.history)
+            session = zenoh.open(client_config(args.connect, args.connect_timeout, int(args.lease * 1000),
+                                              security=args.security))
+        except zenoh.ZError as exc:
+            print(
+                f"{args.name}: cannot reach the coordinator at {args.connect} within {args.connect_timeout:g} s "
+                f"(or its login/TLS refused ours: check ${ZENOH_AUTH_ENV}/--auth-file and --tls-ca) ({exc})",
+                file=sys.stderr,
+            )
+            return 2
+    except _Stop as why:  # also one that arrived while zenoh.open held it, raised in the handler above
         if not args.quiet_stop:
             print(f"{args.name}: stopping on {why}", file=sys.stderr)
         return 0

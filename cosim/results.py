@@ -246,12 +246,20 @@ def recover(path: Path) -> str:
     the file.
     """
     path = Path(path)
+    if path.is_dir():
+        raise OutputError(f"{path} is a directory, not a result file (.csv or .npz)")
+    if not is_npz(path) and path.suffix.lower() != ".csv":
+        raise OutputError(f"{path} is not a result file: cosim writes .csv or .npz")
     lock = OutputLock.acquire(path)
     try:
         if is_npz(path):
             stream = stream_path(path)
             if not stream.exists():
                 if path.exists():
+                    try:
+                        read_results(path)
+                    except Exception as exc:  # whatever np.load makes of a file that is not an NPZ of ours
+                        raise OutputError(f"{path}: not a cosim result file ({type(exc).__name__}: {exc})") from None
                     return f"{path} is complete (no {stream.name} beside it): nothing to recover"
                 raise OutputError(f"neither {path} nor {stream} exists: nothing to recover")
             try:
@@ -264,8 +272,9 @@ def recover(path: Path) -> str:
             return f"{path}: {_span(data)} recovered from {stream.name}{cut}"
         if not path.exists():
             raise OutputError(f"{path} does not exist: nothing to recover")
+        _check_header(path, "time")  # before anything is cut: never shorten a file that is not ours
         cut = _cut_torn_row(path)
-        cut_diag = _cut_torn_row(diag_path(path))
+        cut_diag = _cut_torn_row(diag_path(path)) if _has_header(diag_path(path), "interval") else ""
         try:
             _, data = read_results(path)
         except (ValueError, OSError) as exc:
@@ -273,6 +282,22 @@ def recover(path: Path) -> str:
         return f"{path}: {_span(data)}{cut or ' (complete)'}{cut_diag}"
     finally:
         lock.release()
+
+
+def _has_header(path: Path, first: str) -> bool:
+    """Whether ``path`` starts with a complete CSV header whose first column is ``first``."""
+    try:
+        with path.open("rb") as f:
+            line = f.readline(1 << 16)
+    except OSError:
+        return False
+    return line.endswith(b"\n") and line.split(b",", 1)[0].strip() == first.encode()
+
+
+def _check_header(path: Path, first: str) -> None:
+    if not _has_header(path, first):
+        raise OutputError(f"{path}: not a cosim result file (its first line is not a header starting with "
+                          f"'{first},'): left as it was")
 
 
 def _span(data: np.ndarray) -> str:

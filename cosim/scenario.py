@@ -211,6 +211,12 @@ def load(path: str | Path) -> Scenario:
         raw = tomllib.loads(path.read_text())
     except FileNotFoundError:
         raise ScenarioError(f"scenario file {path} not found") from None
+    except IsADirectoryError:
+        raise ScenarioError(f"{path} is a directory: give a scenario file (.toml) in it") from None
+    except UnicodeDecodeError:
+        raise ScenarioError(f"{path}: not a text file, so not a scenario (TOML)") from None
+    except OSError as exc:
+        raise ScenarioError(f"{path}: cannot read it ({exc.strerror or exc})") from None
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(f"{path}: not valid TOML: {exc}") from None
     return parse(raw, path)

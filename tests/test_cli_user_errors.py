@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -74,3 +75,60 @@ def test_a_broken_model_module_is_one_line_naming_its_file_and_line(tmp_path: Pa
         assert len(lines) == 1 and lines[0].startswith("cosim: ") and "Traceback" not in done.stderr, done.stderr
         assert "model 'broken:Broken': importing 'broken' raised" in lines[0], lines[0]
         assert all(w in lines[0] for w in words), lines[0]
+
+
+@pytest.mark.parametrize(("args", "words"), [
+    (["--timeout", "0"], "argument --timeout: must be a finite number of seconds > 0, got 0"),
+    (["--timeout", "nan"], "argument --timeout: must be a finite number of seconds > 0, got nan"),
+    (["--restarts", "-1"], "argument --restarts: must be a whole number >= 0, got -1"),
+    (["--attach-wait", "-5"], "argument --attach-wait: must be a finite number of seconds > 0, got -5"),
+    (["--output", "out.txt"], "argument --output: 'out.txt': a result file ends in .csv or .npz (lower case)"),
+    (["--output", "out.NPZ"], "a result file ends in .csv or .npz (lower case)"),
+])
+def test_a_bad_option_value_is_refused_naming_the_option(tmp_path: Path, args: list[str], words: str) -> None:
+    """Values the scenario file's [run] table refuses are refused on the command line too (a zero timeout made every
+    subsim 'hung'; a .txt output was written as CSV)."""
+    done = subprocess.run([*COSIM, "run", str(OSCILLATOR), "--quiet", *args], capture_output=True, text=True,
+                          timeout=60, cwd=tmp_path)
+    assert done.returncode == 2 and "Traceback" not in done.stderr
+    last = done.stderr.strip().splitlines()[-1]
+    assert last.startswith("cosim run: error: argument --") and words in last, done.stderr
+    assert not (tmp_path / "results").exists()  # refused before anything ran
+
+
+@pytest.mark.parametrize(("command", "words"), [
+    (["run", "."], "is a directory: give a scenario file (.toml) in it"),
+    (["describe", "."], "is a directory: give a scenario file (.toml) in it"),
+    (["run", "binary.toml"], "binary.toml: not a text file, so not a scenario (TOML)"),
+    (["run", str(OSCILLATOR), "--listen", "garbage"], "cannot listen on garbage: Endpoints must be of the form"),
+])
+def test_a_scenario_or_endpoint_that_cannot_be_used_is_one_line(tmp_path: Path, command: list[str],
+                                                                words: str) -> None:
+    (tmp_path / "binary.toml").write_bytes(bytes(range(256)))
+    done = subprocess.run([*COSIM, *command, "--quiet"] if command[0] == "run" else [*COSIM, *command],
+                          capture_output=True, text=True, timeout=60, cwd=tmp_path)
+    lines = done.stderr.strip().splitlines()
+    assert done.returncode == 2 and len(lines) == 1 and words in lines[0], done.stderr
+    assert ".rs:" not in lines[0] and "Traceback" not in done.stderr  # no Rust source paths, no Python frames
+
+
+@pytest.mark.parametrize(("command", "words"), [
+    (["-m", "subsims.oscillator", "--connect", "tcp/127.0.0.1:9", "--run", "r1", "--connect-timeout", "-1"],
+     "argument --connect-timeout: must be a number of seconds > 0 and at most a day, got -1"),
+    (["-m", "subsims.oscillator", "--connect", "tcp/127.0.0.1:9", "--run", "r1", "--lease", "nan"],
+     "argument --lease: must be a number of seconds > 0 and at most a day, got nan"),
+    (["-m", "subsims.oscillator", "--connect", "tcp/127.0.0.1:9", "--run", "r1", "--history", "-1"],
+     "argument --history: must be a whole number >= 0, got -1"),
+    (["-m", "cosim.conformance", "tcp/127.0.0.1:0", "r1", "mass", "--samples", "1"],
+     "--samples must be at least 2"),
+    (["-m", "cosim.conformance", "tcp/127.0.0.1:0", "r1", "mass", "--interval", "0"],
+     "--interval must be a finite number of seconds > 0"),
+    (["-m", "cosim.conformance", "garbage", "r1", "mass"], "cannot listen on garbage"),
+])
+def test_a_subsim_or_checker_argument_that_cannot_work_is_refused_at_once(command: list[str], words: str) -> None:
+    """An endless --connect-timeout could not be interrupted (zenoh holds the signals while it connects); a bad
+    --history or --lease was a traceback; a bad --interval was reported as the subsim's violation."""
+    done = subprocess.run([sys.executable, *command], capture_output=True, text=True, timeout=60,
+                          env={**os.environ, "COSIM_SECRET": "00" * 32})
+    assert done.returncode == 2 and words in done.stderr.strip().splitlines()[-1], done.stderr
+    assert "Traceback" not in done.stderr

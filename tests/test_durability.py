@@ -263,6 +263,24 @@ def test_recover_cuts_a_torn_csv_row(tmp_path: Path) -> None:
     assert_whole_intervals(out)
 
 
+@pytest.mark.parametrize(("name", "content", "words"), [
+    ("victim.toml", b'name = "x"\nstop = 2.0', "is not a result file: cosim writes .csv or .npz"),
+    ("notes.csv", b"a,b\n1,2\n3,", "not a cosim result file (its first line is not a header starting with 'time,')"),
+    ("binary.csv", bytes(range(256)) * 4, "not a cosim result file"),
+    ("garbage.npz", b"PK\x03\x04 not really a zip", "not a cosim result file"),
+])
+def test_recover_leaves_a_file_that_is_not_a_result_file_as_it_was(tmp_path: Path, name: str, content: bytes,
+                                                                  words: str) -> None:
+    """recover cuts a torn last row: it must be sure the file is one of its own first (it shortened a TOML file)."""
+    victim = tmp_path / name
+    victim.write_bytes(content)
+    done = cosim("recover", str(victim))
+    assert done.returncode != 0 and words in done.stderr and "Traceback" not in done.stderr, done.stderr
+    assert victim.read_bytes() == content
+    folder = cosim("recover", str(tmp_path))
+    assert folder.returncode != 0 and "is a directory" in folder.stderr and "Traceback" not in folder.stderr
+
+
 # --- B. outputs never silently damaged ---------------------------------------------------------------
 
 def test_existing_result_is_refused_before_launch_unless_overwrite(tmp_path: Path) -> None:

@@ -144,6 +144,9 @@ def test_time_window(satellite_results: list[Path], tmp_path: Path) -> None:
     assert tmp_path / "satellite-euler.png" in written
     with pytest.raises(PlotError, match="inside the window"):
         plot_files(satellite_results, tmp_path, window=(100.0, 200.0))
+    for backwards in ((40.0, 20.0), (float("nan"), 40.0)):  # not "no samples": the span itself is wrong
+        with pytest.raises(PlotError, match="give a time span T0 < T1"):
+            plot_files(satellite_results, tmp_path, window=backwards)
 
 
 def test_generic_signals_via_cli(tmp_path: Path, capsys: pytest.CaptureFixture, drawn: dict[str, dict]) -> None:
