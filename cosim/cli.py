@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import sys
 from collections.abc import Sequence
@@ -13,7 +12,7 @@ from cosim import __version__, interrupt
 from cosim.contract import SubsimError
 from cosim.coupler.relaxation import METHODS, Interval, NotConverged
 from cosim.outputs import OutputError, OutputWriteError
-from cosim.preflight import UsageError, check_listen, check_stop, zenoh_error_line
+from cosim.preflight import UsageError, check_listen, check_run_options, check_stop, zenoh_error_line
 from cosim.protocol.keys import check_name
 from cosim.protocol.security import Security
 from cosim.protocol.transport.session import BusError
@@ -53,6 +52,7 @@ def _run_until_done(args: argparse.Namespace, state: dict) -> int:
         args.plot = True
     scenario = load(args.scenario)
     check_stop(args.stop, scenario.start)
+    check_run_options(args)
     method = args.method or scenario.default_method
     output = state["output"] = Path(args.output) if args.output is not None else default_output(scenario, method)
 
@@ -64,13 +64,19 @@ def _run_until_done(args: argparse.Namespace, state: dict) -> int:
 
         report = run_unified(scenario, stop=args.stop, output=output, overwrite=args.overwrite, on_interval=committed)
     else:
+        security = _security(args, scenario.security)
+        if args.listen is None:  # loopback, a free port; over TLS when a certificate is given
+            args.listen = "tls/localhost:0" if security is not None and security.tls else "tcp/127.0.0.1:0"
         if not args.inprocess:
             check_listen(args.listen)
+            launched = [n for n, spec in scenario.subsims.items() if not spec.external]
+            if security is not None and security.tls and security.tls_ca is None and launched:
+                raise UsageError("with --tls-cert the subsims cosim launches need --tls-ca too: the CA that signed "
+                                 "the certificate, to verify the router with (they would time out)")
         report = run_scenario(scenario, method=method, stop=args.stop, output=output, inprocess=args.inprocess,
                               listen=args.listen, progress=not args.quiet, on_interval=committed,
                               overwrite=args.overwrite, restarts=args.restarts, timeout=args.timeout,
-                              security=_security(args, scenario.security),
-                              run_id=args.run_id, attach_wait=args.attach_wait)
+                              security=security, run_id=args.run_id, attach_wait=args.attach_wait)
     s = report.summary
     hist = ", ".join(f"{k} stages: {v}" for k, v in sorted(s.stages.items()))
     print(f"{scenario.name} ({report.method}): {s.intervals} intervals to t = {s.t_end:.6g} in {s.wall_time:.2f} s"
@@ -176,34 +182,6 @@ def _run_id(text: str) -> str:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
-def _seconds(text: str) -> float:
-    """A finite number of seconds > 0 (argparse names the option in its error)."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a number of seconds, got {text!r}") from None
-    if not math.isfinite(value) or value <= 0:
-        raise argparse.ArgumentTypeError(f"must be a finite number of seconds > 0, got {text}")
-    return value
-
-
-def _count(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a whole number >= 0, got {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must be a whole number >= 0, got {value}")
-    return value
-
-
-def _result_file(text: str) -> Path:
-    path = Path(text)
-    if path.suffix not in (".csv", ".npz"):
-        raise argparse.ArgumentTypeError(f"{text!r}: a result file ends in .csv or .npz (lower case)")
-    return path
-
-
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="cosim", description=__doc__)
     p.add_argument("--version", action="version", version=f"cosim {__version__}")
@@ -214,21 +192,22 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"scenario file (default: {DEFAULT_SCENARIO.name} to t = {DEFAULT_STOP:g} s, with plots)")
     r.add_argument("--plot", action="store_true", help="also write PNG plots beside the results")
     r.add_argument("--stop", type=float, help="stop time (default: the scenario's)")
-    r.add_argument("--output", type=_result_file,
+    r.add_argument("--output", type=Path,
                    help="result file, .csv or .npz (default: results/<name>-<method>.csv)")
     r.add_argument("--overwrite", action="store_true", help="replace an existing result file (default: refuse)")
     r.add_argument("--method", choices=[*METHODS, "unified"], help="coupling method (default: the scenario's)")
     r.add_argument("--inprocess", action="store_true", help="run every subsim in this process (no Zenoh)")
-    r.add_argument("--listen", default="tcp/127.0.0.1:0",
-                   help="router endpoint (default: loopback, free port; use tcp/0.0.0.0:7447 for other machines)")
+    r.add_argument("--listen",
+                   help="router endpoint (default: loopback, a free port: tcp/127.0.0.1:0, with --tls-cert "
+                        "tls/localhost:0; use tcp/0.0.0.0:7447 for other machines)")
     r.add_argument("--run-id", type=_run_id, help="run id that namespaces every key (default: a fresh one)")
-    r.add_argument("--attach-wait", type=_seconds, default=300.0, metavar="S",
+    r.add_argument("--attach-wait", type=float, default=300.0, metavar="S",
                    help="seconds to wait for each external subsim (default: 300)")
     r.add_argument("--quiet", action="store_true", help="no progress display")
-    r.add_argument("--restarts", type=_count, metavar="N",
+    r.add_argument("--restarts", type=int, metavar="N",
                    help="replace subsims that die or hang up to N times, restoring their committed state "
                         "(default: the scenario's [run] restarts, 2; 0 stops the run at the first failure)")
-    r.add_argument("--timeout", type=_seconds, metavar="SECONDS",
+    r.add_argument("--timeout", type=float, metavar="SECONDS",
                    help="wait this long for a reply before a subsim counts as hung (default: derived from the "
                         "measured request times, at least 1.5 s)")
     r.add_argument("--tls-cert", type=Path, help="router certificate (PEM); listen on tls/<host>:<port> (see "

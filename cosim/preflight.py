@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import argparse
 import errno
 import math
 import re
 import socket
+from pathlib import Path
 
 
 class UsageError(ValueError):
@@ -18,6 +20,18 @@ def check_stop(stop: float | None, start: float) -> None:
         return
     if not math.isfinite(stop) or stop <= start:
         raise UsageError(f"--stop must be a finite time after the scenario's start ({start:g} s), got {stop:g}")
+
+
+def check_run_options(args: argparse.Namespace) -> None:
+    """``cosim run``'s numbers and output file, as the scenario's ``[run]`` table checks its own: one line each."""
+    for option, value in (("--timeout", args.timeout), ("--attach-wait", args.attach_wait)):
+        if value is not None and not (math.isfinite(value) and value > 0):
+            raise UsageError(f"{option} must be a finite number of seconds > 0, got {value:g}")
+    if args.restarts is not None and args.restarts < 0:
+        raise UsageError(f"--restarts must be a whole number >= 0, got {args.restarts}")
+    output = args.output
+    if output is not None and not Path(output).is_dir() and Path(output).suffix not in (".csv", ".npz"):
+        raise UsageError(f"--output {output}: a result file ends in .csv or .npz (lower case)")
 
 
 _TCP = re.compile(r"^(?P<proto>tcp|udp)/(?:\[(?P<v6>[^\]]+)\]|(?P<host>[^:/\[\]]+)):(?P<port>\d+)(?:#.*)?$")

@@ -78,21 +78,19 @@ def test_a_broken_model_module_is_one_line_naming_its_file_and_line(tmp_path: Pa
 
 
 @pytest.mark.parametrize(("args", "words"), [
-    (["--timeout", "0"], "argument --timeout: must be a finite number of seconds > 0, got 0"),
-    (["--timeout", "nan"], "argument --timeout: must be a finite number of seconds > 0, got nan"),
-    (["--restarts", "-1"], "argument --restarts: must be a whole number >= 0, got -1"),
-    (["--attach-wait", "-5"], "argument --attach-wait: must be a finite number of seconds > 0, got -5"),
-    (["--output", "out.txt"], "argument --output: 'out.txt': a result file ends in .csv or .npz (lower case)"),
-    (["--output", "out.NPZ"], "a result file ends in .csv or .npz (lower case)"),
+    (["--timeout", "0"], "--timeout must be a finite number of seconds > 0, got 0"),
+    (["--timeout", "nan"], "--timeout must be a finite number of seconds > 0, got nan"),
+    (["--restarts", "-1"], "--restarts must be a whole number >= 0, got -1"),
+    (["--attach-wait", "-5"], "--attach-wait must be a finite number of seconds > 0, got -5"),
+    (["--output", "out.txt"], "--output out.txt: a result file ends in .csv or .npz (lower case)"),
+    (["--output", "out.NPZ"], "--output out.NPZ: a result file ends in .csv or .npz (lower case)"),
 ])
 def test_a_bad_option_value_is_refused_naming_the_option(tmp_path: Path, args: list[str], words: str) -> None:
     """Values the scenario file's [run] table refuses are refused on the command line too (a zero timeout made every
     subsim 'hung'; a .txt output was written as CSV)."""
     done = subprocess.run([*COSIM, "run", str(OSCILLATOR), "--quiet", *args], capture_output=True, text=True,
                           timeout=60, cwd=tmp_path)
-    assert done.returncode == 2 and "Traceback" not in done.stderr
-    last = done.stderr.strip().splitlines()[-1]
-    assert last.startswith("cosim run: error: argument --") and words in last, done.stderr
+    assert done.returncode == 2 and done.stderr.splitlines() == [f"cosim: {words}"], done.stderr
     assert not (tmp_path / "results").exists()  # refused before anything ran
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -18,6 +19,7 @@ from cosim.protocol.transport.session import client_config
 pytestmark = [pytest.mark.slow]  # the inner loop: pytest -m "not slow"
 
 T = np.array([0.0, 0.5])
+OSCILLATOR = Path(__file__).parents[1] / "scenarios" / "oscillator.toml"
 
 
 @pytest.fixture(scope="module")
@@ -77,3 +79,23 @@ def test_an_auth_file_login_serves_an_external_subsim(certs: dict[str, Path], tm
 def test_a_tls_endpoint_without_a_certificate_is_refused_with_a_clear_message() -> None:
     with pytest.raises(ValueError, match="--tls-cert"):
         Bus.open("tls/localhost:0")
+
+
+def test_cosim_run_with_a_certificate_listens_on_tls_by_default_and_asks_for_the_ca(
+    certs: dict[str, Path], tmp_path: Path
+) -> None:
+    """--tls-cert alone used to leave the default tcp/ endpoint (refused: must be tls/), and without --tls-ca the
+    launched subsims timed out after 10 s; a missing file is named by its option."""
+    cosim = [sys.executable, "-m", "cosim.cli", "run", str(OSCILLATOR), "--stop", "0.1", "--quiet",
+             "--tls-cert", str(certs["router_pem"]), "--tls-key", str(certs["router_key"])]
+    ok = subprocess.run([*cosim, "--tls-ca", str(certs["ca_pem"]), "--output", str(tmp_path / "a.csv")],
+                        capture_output=True, text=True, timeout=120)
+    assert ok.returncode == 0, ok.stderr
+    assert "via tls/localhost:" in ok.stderr  # the launched subsims said where they connected
+    no_ca = subprocess.run([*cosim, "--output", str(tmp_path / "b.csv")], capture_output=True, text=True, timeout=60)
+    assert no_ca.returncode == 2 and "need --tls-ca too" in no_ca.stderr and "Traceback" not in no_ca.stderr
+    assert len(no_ca.stderr.strip().splitlines()) == 1, no_ca.stderr
+    missing = subprocess.run([*cosim, "--tls-ca", str(tmp_path / "nope.pem"), "--output", str(tmp_path / "c.csv")],
+                             capture_output=True, text=True, timeout=60)
+    assert missing.returncode == 2 and f"--tls-ca (tls_ca in [security]): no such file: {tmp_path / 'nope.pem'}" \
+        in missing.stderr

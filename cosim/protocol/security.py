@@ -112,8 +112,10 @@ class Security:
             raise ValueError("mutual TLS needs --tls-cert, --tls-key and --tls-ca (their CA)")
         for what, path in (("tls_cert", self.tls_cert), ("tls_key", self.tls_key), ("tls_ca", self.tls_ca),
                            ("auth_file", self.auth_file)):
+            option = "--" + what.replace("_", "-")
             if path is not None and not Path(path).is_file():
-                raise ValueError(f"{what}: no such file {path}")
+                raise ValueError(f"{option} ({what} in [security]): "
+                                 f"{'a directory, not a file' if Path(path).is_dir() else 'no such file'}: {path}")
         if self.auth_file is not None:
             read_dictionary(self.auth_file)
         return self
