@@ -100,7 +100,8 @@ def open_session(
     if inprocess:
         for name, spec in scenario.subsims.items():
             if spec.external or spec.model is None:
-                raise ScenarioError(f"{scenario.path}: [subsims.{name}] is external: cannot run it --inprocess")
+                raise ScenarioError(f"{scenario.path}: [subsims.{name}] is external: it cannot run in this "
+                                    "process (cosim run without --inprocess; cosim describe --launch)")
             handles[name] = InProcessHandle(spec.model_class()(), name)
     else:
         try:

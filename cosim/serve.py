@@ -15,9 +15,11 @@ from cosim.process import main as serve_model
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if not argv or argv[0].startswith("-"):
-        print("usage: python -m cosim.serve package.module:Class --connect ENDPOINT --run RUN [--name NAME]",
-              file=sys.stderr)
-        return 2
+        asked = bool(argv) and argv[0] in ("-h", "--help")
+        print("usage: python -m cosim.serve package.module:Class --connect ENDPOINT --run RUN [--name NAME]"
+              + ("\n(python -m cosim.serve package.module:Class --help lists every option)" if asked else ""),
+              file=sys.stdout if asked else sys.stderr)
+        return 0 if asked else 2
     try:
         cls = load_model(argv[0])
     except ValueError as exc:

@@ -130,3 +130,23 @@ def test_a_subsim_or_checker_argument_that_cannot_work_is_refused_at_once(comman
                           env={**os.environ, "COSIM_SECRET": "00" * 32})
     assert done.returncode == 2 and words in done.stderr.strip().splitlines()[-1], done.stderr
     assert "Traceback" not in done.stderr
+
+
+def test_describe_of_a_scenario_with_an_external_subsim_says_how(tmp_path: Path) -> None:
+    sc = tmp_path / "s.toml"
+    sc.write_text(OSCILLATOR.read_text().replace("[subsims.mass2]\n", "[subsims.mass2]\nexternal = true\n", 1))
+    done = subprocess.run([*COSIM, "describe", str(sc)], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2 and "cosim describe --launch" in done.stderr and "Traceback" not in done.stderr
+
+
+def test_a_binary_auth_file_is_named(tmp_path: Path) -> None:
+    (tmp_path / "users").write_bytes(bytes(range(128, 256)))
+    done = subprocess.run([*COSIM, "run", str(OSCILLATOR), "--auth-file", str(tmp_path / "users"), "--quiet",
+                           "--output", str(tmp_path / "x.csv")], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2 and done.stderr.splitlines() == [
+        f"cosim: credential file {tmp_path / 'users'} is not text: expected 'user:password' lines"], done.stderr
+
+
+def test_serve_help_is_not_an_error() -> None:
+    done = subprocess.run([sys.executable, "-m", "cosim.serve", "--help"], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0 and done.stdout.startswith("usage: python -m cosim.serve package.module:Class")

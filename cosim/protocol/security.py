@@ -77,6 +77,8 @@ def _lines(path: Path) -> list[str]:
         text = Path(path).read_text()
     except OSError as exc:
         raise ValueError(f"cannot read credential file {path}: {exc.strerror}") from None
+    except UnicodeDecodeError:
+        raise ValueError(f"credential file {path} is not text: expected 'user:password' lines") from None
     return [ln.strip() for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
 
 
