@@ -200,6 +200,10 @@ def main() -> None:
     ap.add_argument("--paper", action="store_true",
                     help="also the paper's settings (caseN.toml RF-D and RF-C, bars 4x and 6x), interleaved")
     args = ap.parse_args()
+    if args.repeats < 1:
+        ap.error(f"--repeats must be at least 1, got {args.repeats}")
+    if args.cases and not 0 < args.short < args.stop:
+        ap.error(f"need 0 < --short < --stop (the marginal cost is taken between them), got {args.short}, {args.stop}")
     args.out.mkdir(parents=True, exist_ok=True)
     if args.cases:
         cases_1_2(args.cases, args.stop, args.short, args.repeats, args.out, args.paper)

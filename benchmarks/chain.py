@@ -56,6 +56,11 @@ def main() -> None:
     p.add_argument("--repeats", type=int, default=3)
     p.add_argument("--method", default="distributed", choices=["distributed", "centralized"])
     a = p.parse_args()
+    if a.repeats < 1:
+        p.error(f"--repeats must be at least 1, got {a.repeats}")
+    if a.stop < 0.5:  # H = 0.05 s: the short run (stop / 10) must end intervals before the full one
+        p.error(f"--stop must be at least 0.5 s (ten intervals of 0.05 s; the short run goes to stop / 10), "
+                f"got {a.stop}")
     scenarios = {n: chain_scenario(n, a.method, a.stop) for n in a.sizes}
     order_info = {}
     for n, sc in scenarios.items():

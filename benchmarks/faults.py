@@ -64,6 +64,8 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--repeat", type=int, default=5)
     a = p.parse_args()
+    if a.repeat < 1:
+        p.error(f"--repeat must be at least 1, got {a.repeat}")
     print("| fault | detected after: median, max (s) | run going again after: median, max (s) |")
     print("|---|---|---|")
     for name, sig in (("SIGKILL of a subsim", signal.SIGKILL), ("SIGSTOP of a subsim", signal.SIGSTOP)):

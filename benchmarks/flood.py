@@ -1,6 +1,6 @@
 """Malformed and hostile requests against every shipped subsim, over Zenoh: none may crash it or change it.
 
-    python benchmarks/flood.py [--count 100000] [--window 256] [--only integrator oscillator.Mass] [--json]
+    python benchmarks/flood.py [--count 100000] [--window 256] [--only integrator oscillator] [--json]
 
 Each shipped subsim is launched as its own process (cosim.launch.Bus), configured with the parameters
 of the first scenario that uses it, and run one interval and committed. Then ``--count`` requests are
@@ -275,8 +275,9 @@ def main() -> int:
     p.add_argument("--oversized", type=int, default=32, metavar="MB",
                    help="first send one request this large and report (0: skip)")
     args = p.parse_args()
-    if args.oversized and not args.json:
-        print(oversized(args.oversized), flush=True)
+    if args.oversized:  # with --json as one JSON line too: --oversized is never skipped silently
+        line = oversized(args.oversized)
+        print(json.dumps({"oversized_mb": args.oversized, "result": line}) if args.json else line, flush=True)
     with tempfile.TemporaryDirectory(prefix="cosim-flood-") as tmp:
         build_dir = Path(tmp)
         models = {m: prm for m, prm in shipped().items() if not args.only or any(s in m for s in args.only)}

@@ -122,7 +122,7 @@ def main(argv: list[str] | None = None) -> int:
     for row in samples:
         cells = "".join(f" {v / 1024:14.1f}" if (v := row["rss"].get(x)) is not None else f" {'-':>14s}"
                         for x in labels)
-        print(f"{row['t']:9.0f} {row['requests']:9d} {row['wall']:8.1f}{cells}")
+        print(f"{row['t']:9g} {row['requests']:9d} {row['wall']:8.1f}{cells}")
     if len(samples) < 2:
         print("fewer than two samples: the run stopped early")
         return 1

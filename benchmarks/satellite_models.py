@@ -42,8 +42,9 @@ from pathlib import Path
 import numpy as np
 
 parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-parser.add_argument("--root", type=Path, default=Path(os.environ.get("PYTHONPATH", ".").split(os.pathsep)[0]),
-                    help="the tree whose scenarios are run (default: the first PYTHONPATH entry)")
+parser.add_argument("--root", type=Path,
+                    default=Path(os.environ.get("PYTHONPATH", "").split(os.pathsep)[0] or Path(__file__).parents[1]),
+                    help="the tree whose scenarios are run (default: the first PYTHONPATH entry, else this one)")
 parser.add_argument("--stop", type=float, default=400.0, help="problem time of each run, s")
 parser.add_argument("--runs", type=int, default=3, help="repetitions of the three runs (0: none)")
 parser.add_argument("--case", type=int, default=1)

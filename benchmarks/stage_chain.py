@@ -108,7 +108,7 @@ def main() -> int:
         print(f"one stage of 3 subsims on the bus alone, {a.payload} B messages, {a.rounds} rounds x {a.calls}:")
         for name, values in times.items():
             print(f"  {name}: median {statistics.median(values):6.0f} us per stage "
-                  f"(round medians {min(values):.0f}-{max(values):.0f})")
+                  f"(round means {min(values):.0f}-{max(values):.0f})")
         ratio = statistics.median(times["(b) chain of puts"]) / statistics.median(times["(a) 3 round trips"])
         print(f"  chain / round trips: {ratio:.2f}")
     finally:
