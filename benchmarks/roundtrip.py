@@ -517,8 +517,8 @@ def main(argv: list[str] | None = None) -> int:
     med = {k: pct(v, 50) for k, v in phases.items()}
     print(
         f"  the subsim's serving path, wall, medians: the whole callback {med['callback']:.1f} = entry, key check, "
-        f"command peek and lock {med['callback'] - med['admit'] - med['serve']:.1f} + tag check (admit) "
-        f"{med['admit']:.1f} + answer() {pct(srv_wall, 50):.1f} + replay check and reply seal "
+        f"command peek and lock {med['callback'] - med['admit'] - med['serve']:.1f} + tag and replay checks (admit) "
+        f"{med['admit']:.1f} + answer() {pct(srv_wall, 50):.1f} + reply seal "
         f"{med['gate_answer'] - pct(srv_wall, 50):.1f} + query.reply and dropping the query "
         f"{med['serve'] - med['gate_answer']:.1f}"
     )
