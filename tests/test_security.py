@@ -207,3 +207,37 @@ def test_a_replay_is_dropped_before_its_size_is_looked_at() -> None:
     assert admitted is not None and reply is None
     assert gate.admit(small) == (None, None)  # queued once; a replay never reaches the queue
     assert gate.counts["replayed"] == 2 and gate.counts["too_large"] == 1 and gate.counts["admitted"] == 1
+
+
+@pytest.mark.parametrize("impostor", ["answers with an error", "swallows every query"])
+def test_a_login_holder_on_a_subsims_key_cannot_stop_or_starve_the_run(served: Bus, impostor: str) -> None:
+    """A client with the run's login (every subsim has it) declares a queryable on another subsim's key. Zenoh's error
+    replies are not the subsim's: they are skipped like forged ones (one stopped a run as a 'timeout'); and queries go
+    to every queryable on the key, so one declared complete that never answers cannot take them all (it black-holed
+    the subsim until its restarts ran out)."""
+    handle = served.attach("victim")
+    handle.deadline = 2.0
+    attacker = open_client(served, zenoh_login(served.secret, served.run))
+    held: list = []
+
+    def answer_with_an_error(query: zenoh.Query) -> None:
+        with query:
+            query.reply_err(b"attacker")
+
+    def swallow(query: zenoh.Query) -> None:
+        held.append(query)  # kept, never answered (the query would stay open until zenoh's timeout)
+
+    try:
+        if impostor == "answers with an error":
+            trap = attacker.declare_queryable(rpc_key(served.run, "victim"), answer_with_an_error)
+        else:
+            trap = attacker.declare_queryable(rpc_key(served.run, "victim"), swallow, complete=True)
+        t = np.array([0.5, 1.0])
+        for _ in range(5):
+            assert handle.status()["name"] == "victim"
+            result = handle.run_interval(t, {"u": np.ones((2, 1))})
+            assert result.end_time == 1.0
+        trap.undeclare()
+    finally:
+        held.clear()
+        attacker.close()

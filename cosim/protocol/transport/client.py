@@ -17,6 +17,9 @@ from cosim.protocol.messages import ErrorInfo, decode_reply, encode_request, nex
 
 FAST_QUERY_TIMEOUT = 4.0  # seconds: zenoh's own timeout of requests whose deadline is at most half of it
 GONE_GRACE = 0.3  # seconds a request may still be answered after its subsim's liveliness token went
+# Every queryable on a subsim's key gets its requests (not only the best match): another login holder's queryable
+# declared there as complete would otherwise take them all and black-hole the subsim (its replies are forged anyway).
+EVERY_QUERYABLE = zenoh.QueryTarget.ALL
 
 
 class _Pending:
@@ -122,7 +125,7 @@ class RemoteHandle(SubsimHandle):
         # the reply comes (measured: +11 MiB per 10^4 requests with a 120 s timeout), so requests with a short
         # deadline go through a querier with a short timeout (memory stays at rate x FAST_QUERY_TIMEOUT), and the
         # rest (no deadline, or a slow model) through session.get with the timeout they need.
-        self._querier = session.declare_querier(self._key, timeout=FAST_QUERY_TIMEOUT,
+        self._querier = session.declare_querier(self._key, timeout=FAST_QUERY_TIMEOUT, target=EVERY_QUERYABLE,
                                                 consolidation=zenoh.ConsolidationMode.NONE)
         self._alive = threading.Event()
         self._died = threading.Event()
@@ -160,9 +163,8 @@ class RemoteHandle(SubsimHandle):
             raise SubsimError("no_responder", f"no process appeared within {timeout:g} s", self.name, "connect")
         while True:
             seq, frame = self._seal(encode_request("status"))
-            replies = self.session.get(
-                self._key, payload=frame, timeout=1.0, consolidation=zenoh.ConsolidationMode.NONE
-            )
+            replies = self.session.get(self._key, payload=frame, timeout=1.0, target=EVERY_QUERYABLE,
+                                       consolidation=zenoh.ConsolidationMode.NONE)
             if any(r.ok is not None and self._open(seq, r.ok.payload.to_bytes()) is not None for r in replies):
                 return
             if time.monotonic() > deadline:  # its token is there, so it runs: a subsim drops what it cannot open
@@ -184,7 +186,7 @@ class RemoteHandle(SubsimHandle):
         else:
             limit = self.timeout if deadline is None else min(self.timeout, max(2 * deadline, FAST_QUERY_TIMEOUT))
             replies = self.session.get(self._key, payload=payload, timeout=limit, cancellation_token=token,
-                                       consolidation=zenoh.ConsolidationMode.NONE)
+                                       target=EVERY_QUERYABLE, consolidation=zenoh.ConsolidationMode.NONE)
         pending = _Pending(replies, token, None if deadline is None else now + deadline, now + limit)
         self._in_flight.add(pending)
         if deadline is not None:
@@ -208,11 +210,12 @@ class RemoteHandle(SubsimHandle):
         # blocks on the reply channel until the reply or the end of the query (zenoh's timeout, a death, or the
         # watchdog's cancel at the deadline); a waiting coordinator leaves the cores to the subsims
         try:
-            forged = 0
+            forged, error = 0, None
             for reply in pending.all_replies():
                 ok = reply.ok
-                if ok is None:
-                    raise self._zenoh_error(cmd, reply)
+                if ok is None:  # zenoh's timeout, or anyone's reply_err: no reason to stop waiting for the subsim's
+                    error = reply
+                    continue
                 body = self._open(seq, ok.payload.to_bytes())
                 if body is None:  # not sealed with this subsim's key for this request: not from our subsim
                     forged += 1
@@ -225,6 +228,8 @@ class RemoteHandle(SubsimHandle):
                     raise SubsimError(result.code, result.message, result.subsim,
                                       cmd if result.command == "?" else result.command, result.traceback)
                 return result
+            if error is not None and not pending.hung and not forged:
+                raise self._zenoh_error(cmd, error)
             raise self._no_reply(cmd, pending, deadline, forged)
         finally:
             self._in_flight.discard(pending)
