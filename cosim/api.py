@@ -95,7 +95,7 @@ def run(
     params: Mapping[str, Mapping[str, Any]] | None = None,
     output: str | Path | None = None,
     inprocess: bool = False,
-    listen: str = "tcp/127.0.0.1:0",
+    listen: str | None = None,
     run_id: str | None = None,
     attach_wait: float = 300.0,
     progress: bool = False,

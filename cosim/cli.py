@@ -65,10 +65,9 @@ def _run_until_done(args: argparse.Namespace, state: dict) -> int:
         report = run_unified(scenario, stop=args.stop, output=output, overwrite=args.overwrite, on_interval=committed)
     else:
         security = _security(args, scenario.security)
-        if args.listen is None:  # loopback, a free port; over TLS when a certificate is given
-            args.listen = "tls/localhost:0" if security is not None and security.tls else "tcp/127.0.0.1:0"
-        if not args.inprocess:
+        if not args.inprocess and args.listen is not None:
             check_listen(args.listen)
+        if not args.inprocess:
             launched = [n for n, spec in scenario.subsims.items() if not spec.external]
             if security is not None and security.tls and security.tls_ca is None and launched:
                 raise UsageError("with --tls-cert the subsims cosim launches need --tls-ca too: the CA that signed "
@@ -198,8 +197,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--method", choices=[*METHODS, "unified"], help="coupling method (default: the scenario's)")
     r.add_argument("--inprocess", action="store_true", help="run every subsim in this process (no Zenoh)")
     r.add_argument("--listen",
-                   help="router endpoint (default: loopback, a free port: tcp/127.0.0.1:0, with --tls-cert "
-                        "tls/localhost:0; use tcp/0.0.0.0:7447 for other machines)")
+                   help="router endpoint (default: a Unix socket only you can reach; tcp/127.0.0.1:0 with external "
+                        "subsims, tls/localhost:0 with --tls-cert; use tcp/0.0.0.0:7447 for other machines)")
     r.add_argument("--run-id", type=_run_id, help="run id that namespaces every key (default: a fresh one)")
     r.add_argument("--attach-wait", type=float, default=300.0, metavar="S",
                    help="seconds to wait for each external subsim (default: 300)")
@@ -260,7 +259,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"cosim: {exc}", file=sys.stderr)
         return 2
     except BusError as exc:
-        line = zenoh_error_line(exc, getattr(args, "listen", ""))
+        line = zenoh_error_line(exc, getattr(args, "listen", None) or "")
         print(f"cosim: {line}", file=sys.stderr)
         return 2 if line.startswith("--listen") else 1
     except NotConverged as exc:

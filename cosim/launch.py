@@ -6,8 +6,10 @@ Used by ``cosim run`` and by the pytest fixtures in :mod:`cosim.testing`.
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 import sys
+import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -96,6 +98,9 @@ class SubsimProcess:
             self.handle.close()
 
 
+PRIVATE = "private"  # Bus.open(PRIVATE): a router only this user's processes on this machine can reach
+
+
 @dataclass
 class Bus:
     """The coordinator's router session, its endpoint and the run id that namespaces every key.
@@ -111,15 +116,27 @@ class Bus:
     security: Security = field(default_factory=Security)
     processes: list[SubsimProcess] = field(default_factory=list)
     attached: list[str] = field(default_factory=list)  # names of external subsims: sent shutdown on close
+    private_dir: str | None = None  # the 0700 directory of a PRIVATE endpoint's socket, removed on close
 
     @classmethod
     def open(cls, listen: str = "tcp/127.0.0.1:0", run: str | None = None, security: Security | None = None) -> Bus:
+        """``listen``: a Zenoh endpoint, or :data:`PRIVATE`: a Unix socket in a fresh directory only this user can
+        enter, for runs whose subsims are all started here (other users cannot even connect, let alone flood)."""
         security = (security or Security()).check()
         run, secret = run or new_run_id(), new_master_secret()
         user, password = zenoh_login(secret, run)
         logins = {**(read_dictionary(security.auth_file) if security.auth_file else {}), user: password}
-        session, endpoint = open_router(listen, run=run, logins=logins, security=security)
-        bus = cls(session, endpoint, run, secret, security)
+        private_dir = None
+        if listen == PRIVATE:
+            private_dir = tempfile.mkdtemp(prefix="cosim-bus-")  # mode 0700
+            listen = f"unixsock-stream/{private_dir}/router.sock"
+        try:
+            session, endpoint = open_router(listen, run=run, logins=logins, security=security)
+        except BaseException:
+            if private_dir is not None:
+                shutil.rmtree(private_dir, ignore_errors=True)
+            raise
+        bus = cls(session, endpoint, run, secret, security, private_dir=private_dir)
         bus._token = session.liveliness().declare_token(coordinator_alive_key(bus.run))
         return bus
 
@@ -211,6 +228,8 @@ class Bus:
         self.processes.clear()
         self._token.undeclare()
         self.session.close()
+        if self.private_dir is not None:
+            shutil.rmtree(self.private_dir, ignore_errors=True)
 
     def __enter__(self) -> Bus:
         return self

@@ -19,7 +19,7 @@ from cosim.coupler.plan import Plan
 from cosim.coupler.relaxation import Interval, RunSummary
 from cosim.driver import Coordinator, Deadline, Recovery, plan_for
 from cosim.handles import Description, InProcessHandle, SubsimHandle
-from cosim.launch import Bus
+from cosim.launch import PRIVATE, Bus
 from cosim.outputs import reserve_output
 from cosim.progress import Progress
 from cosim.protocol.security import Security
@@ -82,7 +82,7 @@ class Session:
 def open_session(
     scenario: Scenario,
     inprocess: bool = False,
-    listen: str = "tcp/127.0.0.1:0",
+    listen: str | None = None,
     external_wait: float = 300.0,
     log: Log = _stderr,
     timeout: float = 120.0,
@@ -105,7 +105,8 @@ def open_session(
             handles[name] = InProcessHandle(spec.model_class()(), name)
     else:
         try:
-            bus = Bus.open(listen, run=run_id, security=security or scenario.security)
+            security = security or scenario.security
+            bus = Bus.open(listen or default_listen(scenario, security), run=run_id, security=security)
         except (ValueError, RuntimeError) as exc:  # bad --listen or security files; port taken
             raise ScenarioError(f"cannot open the bus: {exc}") from None
     session = Session(scenario, handles, {}, bus, external_wait=external_wait, timeout=timeout, log=log)
@@ -190,6 +191,17 @@ def output_signals(scenario: Scenario, descriptions: dict[str, Description]) -> 
     return out
 
 
+def default_listen(scenario: Scenario, security: Security | None) -> str:
+    """Where the router listens when the user does not say: over TLS on loopback with a certificate; on loopback
+    TCP when a subsim is external (it may be on another machine: --listen tcp/0.0.0.0:<port> then); else on a
+    Unix socket only this user can reach (another user's flood of connections could stop a run on TCP)."""
+    if security is not None and security.tls:
+        return "tls/localhost:0"
+    if any(spec.external for spec in scenario.subsims.values()):
+        return "tcp/127.0.0.1:0"
+    return PRIVATE
+
+
 def default_output(scenario: Scenario, method: str) -> Path:
     return scenario.output_path or Path.cwd() / "results" / f"{scenario.name}-{method}.csv"
 
@@ -200,7 +212,7 @@ def run_scenario(
     stop: float | None = None,
     output: Path | None = None,
     inprocess: bool = False,
-    listen: str = "tcp/127.0.0.1:0",
+    listen: str | None = None,
     progress: bool = True,
     log: Log = _stderr,
     on_interval: Callable[[Interval], None] | None = None,

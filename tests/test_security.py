@@ -241,3 +241,37 @@ def test_a_login_holder_on_a_subsims_key_cannot_stop_or_starve_the_run(served: B
     finally:
         held.clear()
         attacker.close()
+
+
+def test_a_private_bus_listens_where_only_this_user_can_connect() -> None:
+    """Bus.open(PRIVATE): a Unix socket in a fresh 0700 directory (another user's processes cannot connect at all:
+    on TCP, a flood of their connections stopped a run); the directory goes with the bus."""
+    from cosim.launch import PRIVATE
+
+    with Bus.open(PRIVATE) as bus:
+        directory = Path(bus.private_dir)
+        assert bus.endpoint == f"unixsock-stream/{directory}/router.sock"
+        assert directory.stat().st_mode & 0o777 == 0o700 and (directory / "router.sock").is_socket()
+        proc = bus.spawn("subsims.integrator", "a", quiet=True)
+        proc.handle.configure({})
+        assert proc.handle.run_interval(np.array([0.0, 0.5]), {"u": np.ones((2, 1))}).end_time == 0.5
+    assert not directory.exists()
+
+
+@pytest.mark.parametrize(("external", "endpoint"), [(False, "unixsock-stream//"), (True, "tcp/127.0.0.1:")])
+def test_cosim_run_listens_privately_unless_a_subsim_may_come_from_elsewhere(
+    tmp_path: Path, external: bool, endpoint: str
+) -> None:
+    from cosim.runner import default_listen
+
+    text = OSCILLATOR.read_text()
+    if external:
+        text = text.replace("[subsims.mass2]\n", "[subsims.mass2]\nexternal = true\n", 1)
+    (tmp_path / "s.toml").write_text(text)
+    listen = default_listen(load(tmp_path / "s.toml"), None)
+    assert listen == ("tcp/127.0.0.1:0" if external else "private")
+    if not external:  # a whole run: its subsims say where they connected
+        done = subprocess.run([sys.executable, "-m", "cosim.cli", "run", str(tmp_path / "s.toml"), "--stop", "0.1",
+                               "--output", str(tmp_path / "x.csv")], capture_output=True, text=True, timeout=120)
+        assert done.returncode == 0, done.stderr
+        assert f"via {endpoint}" in done.stderr and "/router.sock" in done.stderr
