@@ -48,7 +48,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from cosim.launch import Bus  # noqa: E402
+from cosim.launch import PRIVATE, Bus  # noqa: E402
 from cosim.results import diag_path, read_results  # noqa: E402
 from cosim.runner import run_scenario  # noqa: E402
 from cosim.scenario import Scenario, load  # noqa: E402
@@ -97,7 +97,7 @@ def status_round_trip(calls: int = 500, cpu_calls: int = 3000) -> dict[str, floa
     """``status`` to an aero subsim process (no model work): the median round trip (s), and the CPU (s)
     one request costs both processes together (Zenoh, codec, dispatch); the coordinator blocks while it
     waits, so its waiting is not counted as work."""
-    with Bus.open() as bus:
+    with Bus.open(PRIVATE) as bus:  # where the runs' routers listen (cosim run's default for launched subsims)
         process = bus.spawn("subsims.aero", name="aero", quiet=True)
         handle = process.handle
         for _ in range(50):

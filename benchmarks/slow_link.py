@@ -249,6 +249,7 @@ def run_once(scenario_path: Path, method: str | None, stop: float, delay: float 
     try:
         with relay, tempfile.TemporaryDirectory() as tmp:
             report = run_scenario(scenario, method=method, stop=stop, output=Path(tmp) / "run.csv",
+                                  listen="tcp/127.0.0.1:0",  # what a link between machines is, and what the relay takes
                                   progress=False, log=lambda m: None, on_interval=on_interval)
     finally:
         RemoteHandle._begin = original  # type: ignore[method-assign]
