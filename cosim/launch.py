@@ -5,6 +5,7 @@ Used by ``cosim run`` and by the pytest fixtures in :mod:`cosim.testing`.
 
 from __future__ import annotations
 
+import fcntl
 import os
 import shutil
 import subprocess
@@ -99,6 +100,29 @@ class SubsimProcess:
 
 
 PRIVATE = "private"  # Bus.open(PRIVATE): a router only this user's processes on this machine can reach
+PRIVATE_PREFIX = "cosim-bus-"
+
+
+def _sweep_private_dirs(min_age: float = 60.0) -> None:
+    """Remove the private bus directories of this user's coordinators that were killed (SIGKILL leaves them): Zenoh
+    holds a lock on ``router.sock.lock`` while it listens, so a directory whose lock is free, and that is older than
+    ``min_age`` seconds (not one being set up now), belongs to no live router."""
+    root = Path(tempfile.gettempdir())
+    for directory in root.glob(PRIVATE_PREFIX + "*"):
+        lock = directory / "router.sock.lock"
+        try:
+            if directory.stat().st_uid != os.getuid() or time.time() - directory.stat().st_mtime < min_age:
+                continue
+            fd = os.open(lock, os.O_RDWR)
+        except OSError:
+            continue
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:  # held: a router listens there
+            continue
+        finally:
+            os.close(fd)
+        shutil.rmtree(directory, ignore_errors=True)
 
 
 @dataclass
@@ -128,7 +152,8 @@ class Bus:
         logins = {**(read_dictionary(security.auth_file) if security.auth_file else {}), user: password}
         private_dir = None
         if listen == PRIVATE:
-            private_dir = tempfile.mkdtemp(prefix="cosim-bus-")  # mode 0700
+            _sweep_private_dirs()
+            private_dir = tempfile.mkdtemp(prefix=PRIVATE_PREFIX)  # mode 0700
             listen = f"unixsock-stream/{private_dir}/router.sock"
         try:
             session, endpoint = open_router(listen, run=run, logins=logins, security=security)

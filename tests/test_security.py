@@ -275,3 +275,23 @@ def test_cosim_run_listens_privately_unless_a_subsim_may_come_from_elsewhere(
                                "--output", str(tmp_path / "x.csv")], capture_output=True, text=True, timeout=120)
         assert done.returncode == 0, done.stderr
         assert f"via {endpoint}" in done.stderr and "/router.sock" in done.stderr
+
+
+def test_a_killed_coordinators_private_directory_is_swept_by_the_next_one(tmp_path: Path) -> None:
+    """SIGKILL leaves a private bus's directory behind; the next Bus.open(PRIVATE) removes those whose router lock
+    is free (no router listens there) and leaves a live router's alone."""
+    import tempfile
+    import time
+
+    from cosim.launch import PRIVATE, PRIVATE_PREFIX
+
+    stale = Path(tempfile.mkdtemp(prefix=PRIVATE_PREFIX))
+    (stale / "router.sock.lock").touch()
+    old = time.time() - 3600
+    os.utime(stale, (old, old))
+    with Bus.open(PRIVATE) as live:
+        live_dir = Path(live.private_dir)
+        os.utime(live_dir, (old, old))  # old enough to be swept, were its lock free
+        with Bus.open(PRIVATE) as other:
+            assert live_dir.exists() and Path(other.private_dir).exists()
+        assert not stale.exists()
