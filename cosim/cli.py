@@ -68,7 +68,7 @@ def _run_until_done(args: argparse.Namespace, state: dict) -> int:
         if not args.inprocess and args.listen is not None:
             check_listen(args.listen)
         if not args.inprocess:
-            launched = [n for n, spec in scenario.subsims.items() if not spec.external]
+            launched = any(not spec.external for spec in scenario.subsims.values())
             if security is not None and security.tls and security.tls_ca is None and launched:
                 raise UsageError("with --tls-cert the subsims cosim launches need --tls-ca too: the CA that signed "
                                  "the certificate, to verify the router with (they would time out)")

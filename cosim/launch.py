@@ -30,7 +30,7 @@ from cosim.protocol.security import (
     subsim_key,
     zenoh_login,
 )
-from cosim.protocol.transport.client import RemoteHandle
+from cosim.protocol.transport.client import EVERY_QUERYABLE, RemoteHandle
 from cosim.protocol.transport.session import open_router
 
 
@@ -242,7 +242,7 @@ class Bus:
         """Send ``shutdown`` to attached subsims, stop every spawned process, undeclare the coordinator's
         token, then close the session (the order matters: see zenoh-notes P1)."""
         pending = [self.session.get(rpc_key(self.run, name), timeout=3.0, consolidation=zenoh.ConsolidationMode.NONE,
-                                    target=zenoh.QueryTarget.ALL,
+                                    target=EVERY_QUERYABLE,
                                     payload=seal_request(self.key(name), next_seq(), encode_request("shutdown")))
                    for name in self.attached]  # a subsim gone or busy is ended by the token's DELETE below
         for replies in pending:

@@ -9,6 +9,8 @@ import re
 import socket
 from pathlib import Path
 
+from cosim.protocol.transport.session import error_text
+
 
 class UsageError(ValueError):
     """A command-line argument that cannot work; the message names it and what to do."""
@@ -64,8 +66,7 @@ def check_listen(endpoint: str) -> None:
 
 def zenoh_error_line(exc: BaseException, endpoint: str) -> str:
     """A Zenoh error (a multi-line Rust report with source paths) as one line."""
-    text = " ".join(str(exc).split())
-    text = re.sub(r"\s*at /\S+\.rs:\d+\.?", "", text)
+    text = error_text(exc)
     if "Address already in use" in text:
         port = endpoint.rsplit(":", 1)[-1]
         return f"--listen {endpoint}: port {port} is already in use: stop what holds it or pick another port"

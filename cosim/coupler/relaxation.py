@@ -59,6 +59,11 @@ Evaluations = tuple[tuple[str, Coupling, int], ...]  # couplings with their targ
 Latest = dict[str, tuple[dict[str, np.ndarray], dict[str, np.ndarray]]]  # subsim -> inputs, outputs of its latest run
 
 
+def _whole(value: object, least: int) -> bool:
+    """An integer (a bool is not one here, though Python says so) of at least ``least``."""
+    return isinstance(value, int) and not isinstance(value, bool) and value >= least
+
+
 @dataclass(frozen=True)
 class Settings:
     method: str = "centralized"
@@ -81,15 +86,15 @@ class Settings:
         if isinstance(interval, bool) or not isinstance(interval, (int, float)) or not np.isfinite(interval) \
                 or interval <= 0:
             raise ValueError(f"interval must be a positive number, got {self.interval!r}")
-        if isinstance(self.samples, bool) or not isinstance(self.samples, int) or self.samples < 2:
+        if not _whole(self.samples, 2):
             raise ValueError(f"samples must be an integer >= 2, got {self.samples!r}")
         if self.first_guess not in POLICIES:
             raise ValueError(f"first_guess must be one of {', '.join(POLICIES)}, got {self.first_guess!r}")
         if self.interp not in SCHEMES:
             raise ValueError(f"interp must be one of {', '.join(SCHEMES)}, got {self.interp!r}")
-        if isinstance(self.max_stages, bool) or not isinstance(self.max_stages, int) or self.max_stages < 2:
+        if not _whole(self.max_stages, 2):
             raise ValueError(f"max_stages must be an integer >= 2, got {self.max_stages!r}")
-        if isinstance(self.max_halvings, bool) or not isinstance(self.max_halvings, int) or self.max_halvings < 0:
+        if not _whole(self.max_halvings, 0):
             raise ValueError(f"max_halvings must be an integer >= 0, got {self.max_halvings!r}")
         if not isinstance(self.speculate, bool):
             raise ValueError(f"speculate must be true or false, got {self.speculate!r}")

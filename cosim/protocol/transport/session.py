@@ -145,17 +145,17 @@ def open_router(
                 break
             except zenoh.ZError as exc:
                 if attempt == tries - 1:
-                    raise RuntimeError(f"cannot listen on {endpoint}: {_readable(exc)}") from None
+                    raise RuntimeError(f"cannot listen on {endpoint}: {error_text(exc)[:300]}") from None
     return session, _connectable(proto, host, chosen) if port >= 0 else listen
 
 
-def _readable(exc: BaseException) -> str:
+def error_text(exc: BaseException) -> str:
     """Zenoh's error as one line a user can read: its message, without Rust source paths and debug wrappers."""
     text = " ".join(str(exc).split())
     inner = re.search(r'msg: "(.*?)(?: at /\S+\.rs:\d+\.?)?"', text)  # Json5Err(Message { msg: "...", ...})
     if inner:
         text = inner.group(1)
-    return re.sub(r"\s*at /\S+\.rs:\d+\.?", "", text)[:300]
+    return re.sub(r"\s*at /\S+\.rs:\d+\.?", "", text)
 
 
 def _split_endpoint(endpoint: str) -> tuple[str, int]:
