@@ -457,10 +457,10 @@ def main(argv: list[str] | None = None) -> int:
             for fn in ways.values():
                 sample(fn, a.warmup)
             samples: dict[str, list[float]] = {name: [] for name in ways}
-            per_round = -(-a.samples // a.rounds)
-            for _ in range(a.rounds):
+            for r in range(a.rounds):  # --samples split over the rounds, the first ones taking the remainder
+                count = a.samples // a.rounds + (r < a.samples % a.rounds)
                 for name, fn in ways.items():
-                    samples[name] += sample(fn, per_round)
+                    samples[name] += sample(fn, count)
         finally:
             bare.close()
             if bare_work is not None:
@@ -473,7 +473,7 @@ def main(argv: list[str] | None = None) -> int:
     load = os.getloadavg()
     print(f"run_interval round trip: integrator size {SIZE}, {N} samples over [0, 0.4], input segment {N}x{SIZE}")
     print(
-        f"request {len(request)} B, reply {len(reply)} B; {a.warmup} warm-up + {per_round * a.rounds} timed calls "
+        f"request {len(request)} B, reply {len(reply)} B; {a.warmup} warm-up + {a.samples} timed calls "
         f"per way in {a.rounds} interleaved rounds; load average {load[0]:.2f} on {os.cpu_count()} CPUs"
     )
     print()

@@ -289,7 +289,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not (math.isfinite(args.wait) and args.wait > 0):
         p.error(f"--wait must be a finite number of seconds > 0, got {args.wait}")
     try:
-        bus = Bus.open(args.endpoint, run=args.run)
+        bus = Bus.open(args.endpoint, run=args.run, names=[args.name])
     except (ValueError, RuntimeError) as exc:  # a malformed endpoint, a port in use
         print(f"cosim.conformance: {exc}", file=sys.stderr)
         return 2

@@ -12,6 +12,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -19,7 +20,7 @@ import zenoh
 
 from cosim.contract import SubsimError
 from cosim.importing import SEARCH_PATH
-from cosim.protocol.keys import coordinator_alive_key, new_run_id, rpc_key
+from cosim.protocol.keys import check_name, coordinator_alive_key, new_run_id, rpc_key
 from cosim.protocol.messages import encode_request, next_seq, seal_request
 from cosim.protocol.security import (
     SECRET_ENV,
@@ -130,8 +131,8 @@ class Bus:
     """The coordinator's router session, its endpoint and the run id that namespaces every key.
 
     Every run has an unguessable id and a master secret; each subsim signs with a key derived from it
-    (:meth:`key`), and the router admits only the run's own login (plus the users of
-    ``security.auth_file``) under access control (docs/reliability.md, "Security model")."""
+    (:meth:`key`), and the router admits only the run's own logins (one per subsim when the names are given,
+    plus the users of ``security.auth_file``) under access control (docs/reliability.md, "Security model")."""
 
     session: zenoh.Session
     endpoint: str
@@ -141,27 +142,40 @@ class Bus:
     processes: list[SubsimProcess] = field(default_factory=list)
     attached: list[str] = field(default_factory=list)  # names of external subsims: sent shutdown on close
     private_dir: str | None = None  # the 0700 directory of a PRIVATE endpoint's socket, removed on close
+    names: tuple[str, ...] | None = None  # the subsims this run may have, each with its own login (None: shared)
 
     @classmethod
-    def open(cls, listen: str = "tcp/127.0.0.1:0", run: str | None = None, security: Security | None = None) -> Bus:
+    def open(cls, listen: str = "tcp/127.0.0.1:0", run: str | None = None, security: Security | None = None,
+             names: Sequence[str] | None = None) -> Bus:
         """``listen``: a Zenoh endpoint, or :data:`PRIVATE`: a Unix socket in a fresh directory only this user can
-        enter, for runs whose subsims are all started here (other users cannot even connect, let alone flood)."""
+        enter, for runs whose subsims are all started here (other users cannot even connect, let alone flood).
+
+        ``names``: the subsims of the run. Each then logs in with its own login, which may serve only that
+        subsim's keys, so no subsim can read or answer another's requests (``--auth-file`` users may serve any
+        of them). Without names, every subsim shares the run's login and may serve any subsim key."""
         security = (security or Security()).check()
         run, secret = run or new_run_id(), new_master_secret()
-        user, password = zenoh_login(secret, run)
-        logins = {**(read_dictionary(security.auth_file) if security.auth_file else {}), user: password}
+        site = read_dictionary(security.auth_file) if security.auth_file else {}
+        if names is None:
+            user, password = zenoh_login(secret, run)
+            logins, servers = {**site, user: password}, None
+        else:
+            names = tuple(dict.fromkeys(check_name(n, "subsim name") for n in names))
+            own = {name: zenoh_login(secret, run, name) for name in names}
+            logins = {**site, **dict(own.values())}
+            servers = {name: [user, *site] for name, (user, _) in own.items()}
         private_dir = None
         if listen == PRIVATE:
             _sweep_private_dirs()
             private_dir = tempfile.mkdtemp(prefix=PRIVATE_PREFIX)  # mode 0700
             listen = f"unixsock-stream/{private_dir}/router.sock"
         try:
-            session, endpoint = open_router(listen, run=run, logins=logins, security=security)
+            session, endpoint = open_router(listen, run=run, logins=logins, security=security, servers=servers)
         except BaseException:
             if private_dir is not None:
                 shutil.rmtree(private_dir, ignore_errors=True)
             raise
-        bus = cls(session, endpoint, run, secret, security, private_dir=private_dir)
+        bus = cls(session, endpoint, run, secret, security, private_dir=private_dir, names=names)
         bus._token = session.liveliness().declare_token(coordinator_alive_key(bus.run))
         return bus
 
@@ -170,9 +184,15 @@ class Bus:
         return subsim_key(self.secret, self.run, name)
 
     def subsim_env(self, name: str) -> dict[str, str]:
-        """What a subsim process of this run needs in its environment: its key and the run's login."""
-        user, password = zenoh_login(self.secret, self.run)
+        """What a subsim process of this run needs in its environment: its key and its login to the router."""
+        self._check_named(name)
+        user, password = zenoh_login(self.secret, self.run, None if self.names is None else name)
         return {SECRET_ENV: self.key(name).hex(), ZENOH_AUTH_ENV: f"{user}:{password}"}
+
+    def _check_named(self, name: str) -> None:
+        if self.names is not None and name not in self.names:
+            raise ValueError(f"subsim {name!r} is not one of this run's subsims ({', '.join(self.names)}): the bus "
+                             "gives logins only to the names it opened with")
 
     def command(self, module: str, name: str, model: str | None = None, lease: float | None = None) -> list[str]:
         """The command line of a subsim of this run (under mutual TLS, local ones show the router's certificate)."""
@@ -183,6 +203,7 @@ class Bus:
 
     def attach(self, name: str, timeout: float = 60.0, wait: float = 10.0) -> RemoteHandle:
         """Handle to a subsim that is (or soon will be) serving ``name`` in this run."""
+        self._check_named(name)
         handle = RemoteHandle(self.session, self.run, name, timeout=timeout, key=self.key(name))
         try:
             handle.wait_ready(wait)

@@ -106,7 +106,8 @@ def open_session(
     else:
         try:
             security = security or scenario.security
-            bus = Bus.open(listen or default_listen(scenario, security), run=run_id, security=security)
+            bus = Bus.open(listen or default_listen(scenario, security), run=run_id, security=security,
+                           names=list(scenario.subsims))
         except (ValueError, RuntimeError) as exc:  # bad --listen or security files; port taken
             raise ScenarioError(f"cannot open the bus: {exc}") from None
     session = Session(scenario, handles, {}, bus, external_wait=external_wait, timeout=timeout, log=log)
@@ -121,7 +122,7 @@ def open_session(
                                                       "env": bus.subsim_env(name)}))
                     log(f"cosim: waiting up to {external_wait:g} s for external subsim {name!r}; start it with:\n"
                         f"  {env} {' '.join(['python', *cmd[1:]])}\n"
-                        f"  (the two variables are this run's secrets: hand them over privately)\n"
+                        f"  (the two variables are this subsim's secrets: hand them over privately)\n"
                         f"  (from another machine: run cosim with --listen tcp/0.0.0.0:<port> and use this "
                         f"machine's address)")
                     handles[name] = bus.attach(name, timeout=timeout, wait=external_wait)

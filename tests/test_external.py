@@ -1,5 +1,5 @@
 """External subsims: a launcher fixes the run id, reads a machine-readable attach line, and the
-subsim it started receives ``shutdown`` when the run ends."""
+subsim it started receives ``shutdown`` when the run ends. The login it is handed serves that subsim only."""
 
 from __future__ import annotations
 
@@ -10,7 +10,10 @@ import sys
 from pathlib import Path
 
 import pytest
+import zenoh
 
+from cosim.protocol.security import ZENOH_AUTH_ENV, ClientSecurity, parse_login
+from cosim.protocol.transport.session import client_config
 from cosim.results import read_results
 
 pytestmark = [pytest.mark.slow]  # the inner loop: pytest -m "not slow"
@@ -46,10 +49,21 @@ def test_run_id_attach_line_and_shutdown_of_the_external_subsim(tmp_path: Path, 
     assert attach["endpoint"].startswith("tcp/127.0.0.1:")
     command = attach["command"]
     assert command[:4] == ["python", "-m", "cosim.serve", "subsims.oscillator.subsim:Mass"]
+    # whoever holds mass2's login (its operator, or anyone it leaks to) may serve mass2 only: a queryable on
+    # every subsim's key sees none of mass1's requests (with one login shared by the run it saw all of them)
+    login = parse_login(attach["env"][ZENOH_AUTH_ENV], ZENOH_AUTH_ENV)
+    spy = zenoh.open(client_config(attach["endpoint"], 10.0, security=ClientSecurity(bytes(32), login)))
+    seen: list[str] = []
+    trap = spy.declare_queryable("cosim/launcher-run.1/*/rpc", lambda query: seen.append(str(query.key_expr)))
     user = subprocess.Popen([sys.executable, *command[1:]], stderr=subprocess.PIPE, text=True,
                             env={**os.environ, **attach["env"]})  # the run's key and login for this subsim
     procs.append(user)
-    coord.communicate(timeout=120)
+    try:
+        coord.communicate(timeout=120)
+    finally:
+        trap.undeclare()
+        spy.close()
+    assert seen == []
     assert coord.returncode == 0
     _, err = user.communicate(timeout=30)
     assert user.returncode == 0

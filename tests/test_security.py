@@ -13,6 +13,7 @@ import json
 import os
 import subprocess
 import sys
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -21,7 +22,7 @@ import pytest
 import zenoh
 
 from cosim.launch import Bus
-from cosim.protocol.keys import new_run_id, rpc_key
+from cosim.protocol.keys import alive_key, new_run_id, rpc_key
 from cosim.protocol.messages import decode_reply, encode_request, next_seq, open_reply, seal_request
 from cosim.protocol.security import ClientSecurity, zenoh_login
 from cosim.protocol.transport.session import client_config
@@ -93,6 +94,35 @@ def test_logged_in_client_without_the_key_gets_nothing(served: Bus) -> None:
     assert handle.get_state().time == before.time and np.array_equal(handle.get_state().state, before.state)
 
 
+def test_a_subsims_own_login_cannot_read_serve_or_cover_for_another_subsim() -> None:
+    """With its subsims named up front (as ``cosim run`` does) a bus gives each its own login, which may serve only
+    that subsim's keys. Holding ``other``'s login, a client sees none of ``victim``'s requests through a wildcard or
+    an exact queryable (with one shared login the wildcard one received all of them), and its token on victim's
+    liveliness key does not hide victim's death (it did: Zenoh reports a key gone only when its last token goes)."""
+    with Bus.open(names=["victim", "other"]) as bus:
+        with pytest.raises(ValueError, match="'stranger' is not one of this run's subsims"):
+            bus.subsim_env("stranger")
+        proc = bus.spawn("subsims.integrator", "victim")
+        spy = open_client(bus, zenoh_login(bus.secret, bus.run, "other"))
+        seen: list[str] = []
+        try:
+            for key in (f"cosim/{bus.run}/*/rpc", rpc_key(bus.run, "victim"), "cosim/**"):
+                spy.declare_queryable(key, lambda query: seen.append(str(query.key_expr)))
+            spy.liveliness().declare_token(alive_key(bus.run, "victim"))
+            time.sleep(0.5)  # declarations propagate
+            for _ in range(10):
+                assert proc.handle.status()["name"] == "victim"
+            proc.popen.kill()
+            proc.popen.wait()
+            deadline = time.monotonic() + 5.0
+            while proc.handle.alive and time.monotonic() < deadline:
+                time.sleep(0.02)
+            alive = proc.handle.alive
+        finally:
+            spy.close()
+    assert seen == [] and not alive
+
+
 def test_a_replayed_request_gets_no_answer(served: Bus) -> None:
     key = served.key("victim")
     seq = next_seq()
@@ -125,7 +155,7 @@ def _oscillator(out: Path, monkeypatch: pytest.MonkeyPatch | None = None, tmp: P
 
         def open_under_attack(*args: object, **kwargs: object) -> Bus:
             bus = real_open(*args, **kwargs)
-            user, password = zenoh_login(bus.secret, bus.run)  # the strongest outsider: it has the login
+            user, password = zenoh_login(bus.secret, bus.run, "mass1")  # the strongest outsider: a subsim's login
             for who, login in (("logged-in", f"{user}:{password}"), ("anonymous", None)):
                 cmd = [sys.executable, str(ROOT / "tests" / "attacker.py"), bus.endpoint, bus.run]
                 popen = subprocess.Popen([*cmd, login] if login else cmd, stdout=subprocess.PIPE, text=True,

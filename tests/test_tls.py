@@ -27,9 +27,10 @@ def certs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     return make_certs(tmp_path_factory.mktemp("certs"))
 
 
-def tls_bus(certs: dict[str, Path], mutual: bool = False, auth_file: Path | None = None) -> Bus:
+def tls_bus(certs: dict[str, Path], mutual: bool = False, auth_file: Path | None = None,
+            names: list[str] | None = None) -> Bus:
     security = Security(certs["router_pem"], certs["router_key"], certs["ca_pem"], mutual=mutual, auth_file=auth_file)
-    return Bus.open("tls/localhost:0", security=security)
+    return Bus.open("tls/localhost:0", security=security, names=names)
 
 
 @pytest.mark.parametrize("mutual", [False, True], ids=["server-cert", "mutual"])
@@ -56,12 +57,13 @@ def test_a_client_missing_a_piece_cannot_connect(certs: dict[str, Path], what: s
 
 
 def test_an_auth_file_login_serves_an_external_subsim(certs: dict[str, Path], tmp_path: Path) -> None:
-    """A subsim started by hand with --auth-file (one of the router's dictionary lines) and its key."""
+    """A subsim started by hand with --auth-file (one of the router's dictionary lines) and its key; a site login
+    may serve any of the subsims a run was opened with (each of which has its own login too)."""
     users = tmp_path / "users"
     users.write_text("# operators\nsite-b:correct horse battery staple\n")
     mine = tmp_path / "site-b"
     mine.write_text("site-b:correct horse battery staple\n")
-    with tls_bus(certs, auth_file=users) as bus:
+    with tls_bus(certs, auth_file=users, names=["local", "remote"]) as bus:
         cmd = [*bus.command("subsims.integrator", "remote"), "--auth-file", str(mine)]
         env = {**os.environ, "COSIM_SECRET": bus.key("remote").hex()}
         popen = subprocess.Popen(cmd, env=env)

@@ -34,10 +34,14 @@ def subsim_key(master: bytes, run: str, name: str) -> bytes:
     return hmac.new(master, b"cosim-subsim-key\0" + run.encode() + b"\0" + name.encode(), hashlib.sha256).digest()
 
 
-def zenoh_login(master: bytes, run: str) -> tuple[str, str]:
-    """The run's own Zenoh user and password, derived from the master secret (nothing else to store)."""
-    password = hmac.new(master, b"cosim-zenoh-password\0" + run.encode(), hashlib.sha256).hexdigest()
-    return "cosim-" + run, password
+def zenoh_login(master: bytes, run: str, name: str | None = None) -> tuple[str, str]:
+    """A Zenoh user and password of the run, derived from the master secret (nothing else to store): subsim
+    ``name``'s own login, or with no name the run's shared one (a bus that did not know its subsims' names)."""
+    if name is None:
+        password = hmac.new(master, b"cosim-zenoh-password\0" + run.encode(), hashlib.sha256).hexdigest()
+        return "cosim-" + run, password
+    label = b"cosim-zenoh-subsim-password\0" + run.encode() + b"\0" + name.encode()
+    return f"cosim-{run}.{name}", hmac.new(master, label, hashlib.sha256).hexdigest()
 
 
 def parse_key(text: str, where: str = SECRET_ENV) -> bytes:

@@ -14,6 +14,7 @@ import os
 import re
 import socket
 import tempfile
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -76,30 +77,39 @@ def client_config(
     return make_config("client", connect=[endpoint], extra=extra)
 
 
-def access_control(run: str, users: list[str]) -> dict[str, Any]:
-    """Zenoh access control of a run's router: logged-in ``users`` may serve ``cosim/<run>/<subsim>/rpc``,
-    hold ``cosim/<run>/<subsim>/alive`` and watch ``cosim/<run>/@coordinator/alive``; nothing else passes,
-    in either direction (no wildcard queries or scans, no admin space, no other run's keys). The
-    coordinator's own session is the router, which access control does not filter."""
-    rpc, alive, coordinator = rpc_key(run, "*"), alive_key(run, "*"), coordinator_alive_key(run)
+ANY_SUBSIM = "*"  # in access_control's ``servers``: the logins that may serve any subsim of the run
+
+
+def access_control(run: str, servers: Mapping[str, Sequence[str]]) -> dict[str, Any]:
+    """Zenoh access control of a run's router. ``servers``: subsim name -> the logins that may serve it (the
+    name :data:`ANY_SUBSIM` for logins that may serve any). A login may serve ``cosim/<run>/<name>/rpc``, hold
+    ``cosim/<run>/<name>/alive`` and watch ``cosim/<run>/@coordinator/alive``, and gets only the queries on
+    its subsims' keys; nothing else passes, in either direction (no wildcard queryables, queries or scans, no
+    other subsim's keys, no admin space, no other run's keys: the exact keys do not include a wildcard one).
+    The coordinator's own session is the router, which access control does not filter."""
+    coordinator = coordinator_alive_key(run)
 
     def rule(rule_id: str, flow: str, messages: list[str], key: str) -> dict[str, Any]:
         return {"id": rule_id, "permission": "allow", "flows": [flow], "messages": messages, "key_exprs": [key]}
 
-    rules = [
-        rule("serve", "ingress", ["declare_queryable", "reply"], rpc),
-        rule("announce", "ingress", ["liveliness_token"], alive),
+    common = [
         rule("watch", "ingress", ["declare_liveliness_subscriber", "liveliness_query"], coordinator),
-        rule("requests", "egress", ["query"], rpc),
         rule("coordinator", "egress", ["liveliness_token", "reply"], coordinator),
     ]
-    return {
-        "enabled": True,
-        "default_permission": "deny",
-        "rules": rules,
-        "subjects": [{"id": "subsims", "usernames": users}],
-        "policies": [{"id": "run", "rules": [r["id"] for r in rules], "subjects": ["subsims"]}],
-    }
+    rules, subjects, policies = list(common), [], []
+    for index, (name, users) in enumerate(servers.items()):
+        rpc, alive = rpc_key(run, name), alive_key(run, name)
+        own = [
+            rule(f"serve-{index}", "ingress", ["declare_queryable", "reply"], rpc),
+            rule(f"announce-{index}", "ingress", ["liveliness_token"], alive),
+            rule(f"requests-{index}", "egress", ["query"], rpc),
+        ]
+        rules += own
+        subjects.append({"id": f"serves-{index}", "usernames": sorted(users)})
+        policies.append({"id": f"subsim-{index}", "rules": [r["id"] for r in own + common],
+                         "subjects": [f"serves-{index}"]})
+    return {"enabled": True, "default_permission": "deny", "rules": rules, "subjects": subjects,
+            "policies": policies}
 
 
 def open_router(
@@ -107,12 +117,14 @@ def open_router(
     run: str | None = None,
     logins: dict[str, str] | None = None,
     security: Security | None = None,
+    servers: Mapping[str, Sequence[str]] | None = None,
 ) -> tuple[zenoh.Session, str]:
     """Open the coordinator's router session; return it with the endpoint clients should connect to.
 
     With ``run`` and ``logins`` (user -> password) the router admits only those logins and applies
-    :func:`access_control` for ``run``. ``security`` adds TLS (``tls/`` endpoints) and opens the admin
-    space when asked. Port 0 is replaced by a free port picked here (the admin space stays closed)."""
+    :func:`access_control` for ``run`` with ``servers`` (default: every login may serve any subsim).
+    ``security`` adds TLS (``tls/`` endpoints) and opens the admin space when asked. Port 0 is replaced by a
+    free port picked here (the admin space stays closed)."""
     security = security or Security()
     proto = listen.partition("/")[0]
     host, port = _split_endpoint(listen) if proto in ("tcp", "tls") else ("", -1)  # e.g. unixsock-stream/...
@@ -135,7 +147,7 @@ def open_router(
                 f.write("".join(f"{u}:{p}\n" for u, p in logins.items()))
             extra["transport/auth/usrpwd/dictionary_file"] = str(dictionary)
             if run is not None:
-                extra["access_control"] = access_control(run, sorted(logins))
+                extra["access_control"] = access_control(run, servers or {ANY_SUBSIM: list(logins)})
         tries = 5 if port == 0 else 1
         for attempt in range(tries):
             chosen = _free_port(host) if port == 0 else port
