@@ -228,15 +228,18 @@ class Bus:
         env.setdefault("PYTHONUNBUFFERED", "1")
         if SEARCH_PATH:  # the scenario's directory and the working directory (cosim.importing)
             env["PYTHONPATH"] = os.pathsep.join([*filter(None, [env.get("PYTHONPATH")]), *SEARCH_PATH])
-        popen = subprocess.Popen(
-            [*self.command(module, name, model, lease=lease), "--quiet-stop"],
-            env=env,
-            stdout=subprocess.DEVNULL if quiet else None,
-            stderr=subprocess.DEVNULL if quiet else None,
-            # its own process group: a Ctrl-C at the terminal reaches the coordinator only, which stops its
-            # subsims in order (they would otherwise each print their own stop line)
-            process_group=0,
-        )
+        try:
+            popen = subprocess.Popen(
+                [*self.command(module, name, model, lease=lease), "--quiet-stop"],
+                env=env,
+                stdout=subprocess.DEVNULL if quiet else None,
+                stderr=subprocess.DEVNULL if quiet else None,
+                # its own process group: a Ctrl-C at the terminal reaches the coordinator only, which stops its
+                # subsims in order (they would otherwise each print their own stop line)
+                process_group=0,
+            )
+        except OSError as exc:  # e.g. out of file descriptors or processes
+            raise SubsimError("no_responder", f"cannot start its process: {exc}", name, "spawn") from None
         handle = RemoteHandle(self.session, self.run, name, timeout=timeout, key=self.key(name))
         proc = SubsimProcess(name, popen, handle, module, model, lease)
         self.processes.append(proc)
@@ -272,8 +275,11 @@ class Bus:
         for proc in reversed(self.processes):
             proc.stop()
         self.processes.clear()
-        self._token.undeclare()
-        self.session.close()
+        try:  # the run is over: a router too busy to close in time (a connection flood) must not fail it
+            self._token.undeclare()
+            self.session.close()
+        except zenoh.ZError:
+            pass
         if self.private_dir is not None:
             shutil.rmtree(self.private_dir, ignore_errors=True)
 

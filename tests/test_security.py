@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import os
+import socket
 import subprocess
 import sys
 import time
@@ -21,6 +22,7 @@ import numpy as np
 import pytest
 import zenoh
 
+from cosim.contract import SubsimError
 from cosim.launch import Bus
 from cosim.protocol.keys import alive_key, new_run_id, rpc_key
 from cosim.protocol.messages import decode_reply, encode_request, next_seq, open_reply, seal_request
@@ -325,3 +327,73 @@ def test_a_killed_coordinators_private_directory_is_swept_by_the_next_one(tmp_pa
         with Bus.open(PRIVATE) as other:
             assert live_dir.exists() and Path(other.private_dir).exists()
         assert not stale.exists()
+
+
+def test_idle_connections_without_a_login_do_not_keep_a_subsim_out() -> None:
+    """300 TCP connections to the router that never send a byte (no login needed to open one). With Zenoh's defaults
+    (100 handshakes pending at a time, 10 s each) the subsim's own connection waited behind them past its 10 s connect
+    timeout and the run could not start; now they all wait as pending handshakes and the subsim gets in."""
+    with Bus.open() as bus:
+        host, port = bus.endpoint.removeprefix("tcp/").rsplit(":", 1)
+        idle = []
+        try:
+            for _ in range(300):
+                sock = socket.create_connection((host, int(port)), timeout=5.0)
+                idle.append(sock)
+            handle = bus.spawn("subsims.integrator", "squeezed", wait=20.0).handle
+            assert handle.status()["name"] == "squeezed"
+        finally:
+            for sock in idle:
+                sock.close()
+
+
+def test_the_router_keeps_half_of_its_descriptors_from_pending_handshakes(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The pending-handshake bound follows the descriptors the process may open (its soft limit raised towards the hard
+    one first), so that a flood cannot leave the run without descriptors for its files and processes."""
+    import resource
+
+    from cosim.protocol.transport import session
+
+    limits = {"now": (1024, 1024)}
+    monkeypatch.setattr(resource, "getrlimit", lambda which: limits["now"])
+    monkeypatch.setattr(resource, "setrlimit", lambda which, value: limits.__setitem__("now", value))
+    assert session.accept_pending() == 512  # the hard limit is 1024: nothing to raise
+    limits["now"] = (1024, 1_048_576)
+    assert session.accept_pending() == 10_000 and limits["now"] == (20_000, 1_048_576)
+    limits["now"] = (150, 150)
+    assert session.accept_pending() == 100  # never below Zenoh's default
+
+
+def test_a_router_too_busy_to_close_in_time_does_not_fail_a_finished_run() -> None:
+    """Under a connection flood Zenoh's close can time out ("close operation timed out!") after the run has
+    finished and written everything: that turned a complete run into exit code 1. Closing now goes on."""
+    from cosim.launch import PRIVATE
+
+    bus = Bus.open(PRIVATE)
+    real = bus.session
+
+    class SlowToClose:
+        def __getattr__(self, name: str) -> object:
+            return getattr(real, name)
+
+        def close(self) -> None:
+            real.close()
+            raise zenoh.ZError("close operation timed out!")
+
+    bus.session = SlowToClose()  # type: ignore[assignment]
+    bus.close()
+    assert bus.private_dir is not None and not Path(bus.private_dir).exists()
+
+
+def test_a_subsim_process_that_cannot_be_started_is_one_line(monkeypatch: pytest.MonkeyPatch) -> None:
+    import cosim.launch
+
+    def out_of_descriptors(*args: object, **kwargs: object) -> None:
+        raise OSError(24, "Too many open files")
+
+    with Bus.open() as bus:
+        monkeypatch.setattr(cosim.launch.subprocess, "Popen", out_of_descriptors)
+        with pytest.raises(SubsimError, match=r"^never\.spawn: \[no_responder\] cannot start its process: "
+                                              r"\[Errno 24\] Too many open files$"):
+            bus.spawn("subsims.integrator", "never")
+        assert bus.processes == []

@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 import os
 import re
+import resource
 import socket
 import tempfile
 from collections.abc import Mapping, Sequence
@@ -34,6 +35,30 @@ BusError = zenoh.ZError
 SINGLE_THREAD_RUNTIME = (
     "(app: (worker_threads: 1), rx: (handover: app), tx: (handover: app), acc: (handover: app), net: (handover: app))"
 )
+
+
+# Incoming links: a flood of TCP connections that never log in (no login needed to open one) kept subsims out with
+# Zenoh's defaults, which admit 100 handshakes at a time and give each 10 s: 150 idle connections stopped a run from
+# starting. Many more may be pending, within the descriptors this process may open, and each gets 3 s: enough for a
+# handshake's 4 round trips (TLS included) across a slow link; a subsim whose try runs out tries again.
+ACCEPT_TIMEOUT_MS = 3000
+ACCEPT_PENDING_MAX = 10000
+
+
+def accept_pending() -> int:
+    """How many handshakes the router may have pending: half of the file descriptors this process may open (its
+    soft limit raised towards the hard one first), so that a flood leaves descriptors for the run's own files and
+    processes; at least Zenoh's default of 100."""
+    want = 2 * ACCEPT_PENDING_MAX
+    soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+    if soft != resource.RLIM_INFINITY and soft < want:
+        try:
+            resource.setrlimit(resource.RLIMIT_NOFILE, (want if hard == resource.RLIM_INFINITY else min(want, hard),
+                                                        hard))
+        except (ValueError, OSError):  # not allowed here: keep the soft limit
+            pass
+        soft = resource.getrlimit(resource.RLIMIT_NOFILE)[0]
+    return ACCEPT_PENDING_MAX if soft == resource.RLIM_INFINITY else max(100, min(ACCEPT_PENDING_MAX, soft // 2))
 
 
 def make_config(
@@ -132,7 +157,11 @@ def open_router(
         raise ValueError(f"--listen {listen}: with a TLS certificate the endpoint must be tls/<host>:<port>")
     if proto == "tls" and not security.tls:
         raise ValueError(f"--listen {listen}: a tls/ endpoint needs --tls-cert and --tls-key (docs/reliability.md)")
-    extra: dict[str, Any] = {"adminspace/enabled": security.admin_space}
+    extra: dict[str, Any] = {
+        "adminspace/enabled": security.admin_space,
+        "transport/unicast/accept_timeout": ACCEPT_TIMEOUT_MS,
+        "transport/unicast/accept_pending": accept_pending(),
+    }
     if security.tls:
         extra["transport/link/tls/listen_certificate"] = str(security.tls_cert)
         extra["transport/link/tls/listen_private_key"] = str(security.tls_key)
