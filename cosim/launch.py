@@ -275,11 +275,11 @@ class Bus:
         for proc in reversed(self.processes):
             proc.stop()
         self.processes.clear()
-        try:  # the run is over: a router too busy to close in time (a connection flood) must not fail it
-            self._token.undeclare()
-            self.session.close()
-        except zenoh.ZError:
-            pass
+        for step in (self._token.undeclare, self.session.close):
+            try:  # the run is over: a router too busy to close in time (a connection flood) must not fail it
+                step()
+            except zenoh.ZError:
+                pass
         if self.private_dir is not None:
             shutil.rmtree(self.private_dir, ignore_errors=True)
 
