@@ -159,6 +159,8 @@ class Bus:
         if names is None:
             user, password = zenoh_login(secret, run)
             logins, servers = {**site, user: password}, None
+        elif not names:  # no login at all would open the router to anyone
+            raise ValueError("Bus.open(names=...): name at least one subsim (or pass None for one shared login)")
         else:
             names = tuple(dict.fromkeys(check_name(n, "subsim name") for n in names))
             own = {name: zenoh_login(secret, run, name) for name in names}

@@ -101,6 +101,8 @@ def test_a_subsims_own_login_cannot_read_serve_or_cover_for_another_subsim() -> 
     that subsim's keys. Holding ``other``'s login, a client sees none of ``victim``'s requests through a wildcard or
     an exact queryable (with one shared login the wildcard one received all of them), and its token on victim's
     liveliness key does not hide victim's death (it did: Zenoh reports a key gone only when its last token goes)."""
+    with pytest.raises(ValueError, match="name at least one subsim"):  # no login at all: a router open to anyone
+        Bus.open(names=[])
     with Bus.open(names=["victim", "other"]) as bus:
         with pytest.raises(ValueError, match="'stranger' is not one of this run's subsims"):
             bus.subsim_env("stranger")

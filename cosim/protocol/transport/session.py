@@ -48,7 +48,7 @@ ACCEPT_PENDING_MAX = 10000
 def accept_pending() -> int:
     """How many handshakes the router may have pending: half of the file descriptors this process may open (its
     soft limit raised towards the hard one first), so that a flood leaves descriptors for the run's own files and
-    processes; at least Zenoh's default of 100."""
+    processes; at least Zenoh's default of 100. (Processes started afterwards inherit the raised soft limit.)"""
     want = 2 * ACCEPT_PENDING_MAX
     soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
     if soft != resource.RLIM_INFINITY and soft < want:
@@ -109,8 +109,8 @@ def access_control(run: str, servers: Mapping[str, Sequence[str]]) -> dict[str, 
     """Zenoh access control of a run's router. ``servers``: subsim name -> the logins that may serve it (the
     name :data:`ANY_SUBSIM` for logins that may serve any). A login may serve ``cosim/<run>/<name>/rpc``, hold
     ``cosim/<run>/<name>/alive`` and watch ``cosim/<run>/@coordinator/alive``, and gets only the queries on
-    its subsims' keys; nothing else passes, in either direction (no wildcard queryables, queries or scans, no
-    other subsim's keys, no admin space, no other run's keys: the exact keys do not include a wildcard one).
+    its subsims' keys; nothing else passes, in either direction (no wildcard queries or scans, no other subsim's
+    requests or liveliness, even to a wildcard queryable, no admin space, no other run's keys).
     The coordinator's own session is the router, which access control does not filter."""
     coordinator = coordinator_alive_key(run)
 
