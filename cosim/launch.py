@@ -106,8 +106,9 @@ PRIVATE_PREFIX = "cosim-bus-"
 
 def _sweep_private_dirs(min_age: float = 60.0) -> None:
     """Remove the private bus directories of this user's coordinators that were killed (SIGKILL leaves them): Zenoh
-    holds a lock on ``router.sock.lock`` while it listens, so a directory whose lock is free, and that is older than
-    ``min_age`` seconds (not one being set up now), belongs to no live router."""
+    holds a lock on ``router.sock.lock`` while it listens, so a directory whose lock is free or gone (its router closed
+    but the coordinator died before removing it), and that is older than ``min_age`` seconds (not one being set up
+    now), belongs to no live router."""
     root = Path(tempfile.gettempdir())
     for directory in root.glob(PRIVATE_PREFIX + "*"):
         lock = directory / "router.sock.lock"
@@ -115,6 +116,9 @@ def _sweep_private_dirs(min_age: float = 60.0) -> None:
             if directory.stat().st_uid != os.getuid() or time.time() - directory.stat().st_mtime < min_age:
                 continue
             fd = os.open(lock, os.O_RDWR)
+        except FileNotFoundError:  # no lock: no router listens there
+            shutil.rmtree(directory, ignore_errors=True)
+            continue
         except OSError:
             continue
         try:

@@ -313,7 +313,7 @@ def test_cosim_run_listens_privately_unless_a_subsim_may_come_from_elsewhere(
 
 def test_a_killed_coordinators_private_directory_is_swept_by_the_next_one(tmp_path: Path) -> None:
     """SIGKILL leaves a private bus's directory behind; the next Bus.open(PRIVATE) removes those whose router lock
-    is free (no router listens there) and leaves a live router's alone."""
+    is free or gone (no router listens there) and leaves a live router's alone."""
     import tempfile
     import time
 
@@ -321,14 +321,16 @@ def test_a_killed_coordinators_private_directory_is_swept_by_the_next_one(tmp_pa
 
     stale = Path(tempfile.mkdtemp(prefix=PRIVATE_PREFIX))
     (stale / "router.sock.lock").touch()
+    empty = Path(tempfile.mkdtemp(prefix=PRIVATE_PREFIX))  # its router closed, then the coordinator died
     old = time.time() - 3600
     os.utime(stale, (old, old))
+    os.utime(empty, (old, old))
     with Bus.open(PRIVATE) as live:
         live_dir = Path(live.private_dir)
         os.utime(live_dir, (old, old))  # old enough to be swept, were its lock free
         with Bus.open(PRIVATE) as other:
             assert live_dir.exists() and Path(other.private_dir).exists()
-        assert not stale.exists()
+        assert not stale.exists() and not empty.exists()
 
 
 def test_idle_connections_without_a_login_do_not_keep_a_subsim_out() -> None:
