@@ -144,6 +144,10 @@ class FmuSubsim(Subsim):
                                  f"names {Path(path).name}")
             info = self.info  # params.fmu may be the coordinator's path of the same file (external subsims)
         else:
+            if not Path(path).is_file():  # perhaps an external subsim, given the coordinator's path on its machine
+                raise FmuError(f"{path}: no such FMU file on this machine; a subsim on another machine than the "
+                               f"coordinator serves its own copy: python -m subsims.fmu /local/path/{Path(path).name} "
+                               "--connect ... --run ... --name ... (docs/fmi.md)")
             info = read_fmu(path)
         kind = params.get("interface", "cs" if "cs" in info.identifiers else "me")
         if kind not in info.identifiers:

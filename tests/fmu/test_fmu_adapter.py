@@ -223,6 +223,9 @@ def test_a_broken_fmu_is_one_clear_line(fmus: dict[str, Path], tmp_path: Path, w
     with pytest.raises(CosimError) as cerr:
         Runtime(FmuSubsim).configure({"fmu": str(path)})
     assert cerr.value.code == "bad_value" and phrase in cerr.value.message
+    if which == "missing":  # e.g. `cosim.serve subsims.fmu:FmuSubsim` on another machine, given the coordinator's path
+        assert "no such FMU file on this machine" in cerr.value.message
+        assert "python -m subsims.fmu /local/path/missing.fmu --connect" in cerr.value.message
 
 
 def test_bad_fmu_does_not_crash_a_served_subsim(fmus: dict[str, Path], cosim_bus) -> None:
