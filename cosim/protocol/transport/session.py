@@ -40,7 +40,8 @@ SINGLE_THREAD_RUNTIME = (
 # Incoming links: a flood of TCP connections that never log in (no login needed to open one) kept subsims out with
 # Zenoh's defaults, which admit 100 handshakes at a time and give each 10 s: 150 idle connections stopped a run from
 # starting. Many more may be pending, within the descriptors this process may open, and each gets 3 s: enough for a
-# handshake's 4 round trips (TLS included) across a slow link; a subsim whose try runs out tries again.
+# handshake's 3-4 round trips (TLS included) over a link of up to about 0.7 s round trip; a subsim whose try runs out
+# tries again. (Measured: a flood delays a new subsim by about this timeout, not by the pending bound.)
 ACCEPT_TIMEOUT_MS = 3000
 ACCEPT_PENDING_MAX = 10000
 
