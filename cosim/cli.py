@@ -65,9 +65,9 @@ def _run_until_done(args: argparse.Namespace, state: dict) -> int:
         report = run_unified(scenario, stop=args.stop, output=output, overwrite=args.overwrite, on_interval=committed)
     else:
         security = _security(args, scenario.security)
-        if not args.inprocess and args.listen is not None:
-            check_listen(args.listen)
         if not args.inprocess:
+            if args.listen is not None:
+                check_listen(args.listen)
             launched = any(not spec.external for spec in scenario.subsims.values())
             if security is not None and security.tls and security.tls_ca is None and launched:
                 raise UsageError("with --tls-cert the subsims cosim launches need --tls-ca too: the CA that signed "

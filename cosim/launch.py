@@ -113,7 +113,8 @@ def _sweep_private_dirs(min_age: float = 60.0) -> None:
     for directory in root.glob(PRIVATE_PREFIX + "*"):
         lock = directory / "router.sock.lock"
         try:
-            if directory.stat().st_uid != os.getuid() or time.time() - directory.stat().st_mtime < min_age:
+            st = directory.stat()
+            if st.st_uid != os.getuid() or time.time() - st.st_mtime < min_age:
                 continue
             fd = os.open(lock, os.O_RDWR)
         except FileNotFoundError:  # no lock: no router listens there
