@@ -42,7 +42,8 @@ def _attrs(**kw: object) -> str:
     return " ".join(f'{k}="{v}"' for k, v in kw.items() if v is not None)
 
 
-def model_description(version: int, state: bool = True, identifier: str = "mass") -> str:
+def model_description(version: int, state: bool = True, identifier: str = "mass", float32: bool = False) -> str:
+    """``float32`` (FMI 3 only): v and F are Float32 variables (the binary must be built with it too)."""
     flag = "true" if state else "false"
     units = "".join(f'<Unit name="{u}"/>' for u in UNITS)
     if version == 2:
@@ -72,7 +73,8 @@ def model_description(version: int, state: bool = True, identifier: str = "mass"
         deriv = {"der(u)": 1, "der(v)": 2}.get(name)
         attrs = _attrs(name=name, valueReference=i + 1, causality=caus, variability=var, initial=init, unit=unit,
                        start=start, derivative=deriv, description=doc or None)
-        rows.append(f"<Float64 {attrs}/>")
+        kind = "Float32" if float32 and name in {"v", "F"} else "Float64"
+        rows.append(f"<{kind} {attrs}/>")
     structure = ('<Output valueReference="1"/><Output valueReference="2"/>'
                  '<ContinuousStateDerivative valueReference="8"/><ContinuousStateDerivative valueReference="9"/>'
                  '<InitialUnknown valueReference="1"/><InitialUnknown valueReference="2"/>'
@@ -99,11 +101,13 @@ def _run(cmd: list[str]) -> str:
     return done.stdout
 
 
-def compile_binary(work: Path, version: int, state: bool = True, identifier: str = "mass") -> Path:
-    """``<identifier>.so`` of the mass model for FMI ``version``."""
+def compile_binary(work: Path, version: int, state: bool = True, identifier: str = "mass",
+                   float32: bool = False) -> Path:
+    """``<identifier>.so`` of the mass model for FMI ``version`` (``float32``: see :func:`model_description`)."""
     work.mkdir(parents=True, exist_ok=True)
     obj = work / f"mass_fmi{version}.o"
-    flags = ["-O2", "-fPIC", "-Wall", "-Werror", f"-I{HEADERS}", f"-I{CSRC}", f"-DMASS_STATE={int(state)}"]
+    flags = ["-O2", "-fPIC", "-Wall", "-Werror", f"-I{HEADERS}", f"-I{CSRC}", f"-DMASS_STATE={int(state)}",
+             f"-DMASS_F32={int(float32)}"]
     _run(["gcc", *flags, "-c", str(CSRC / f"mass_fmi{version}.c"), "-o", str(obj)])
     defined = set(_run(["nm", "-g", "--defined-only", str(obj)]).split())
     stubs = [f for f in _standard_functions(version) if f not in defined]
@@ -127,11 +131,12 @@ def write_fmu(path: Path, xml: str | None, binaries: dict[str, Path], extra: dic
     return path
 
 
-def build_mass_fmu(out: Path, version: int = 2, state: bool = True, name: str | None = None) -> Path:
+def build_mass_fmu(out: Path, version: int = 2, state: bool = True, name: str | None = None,
+                   float32: bool = False) -> Path:
     """Compile and package the mass FMU; returns the path of the ``.fmu``."""
-    name = name or f"mass{version}{'' if state else '_nostate'}"
-    so = compile_binary(out / f"build-{name}", version, state)
-    return write_fmu(out / f"{name}.fmu", model_description(version, state), {PLATFORM[version]: so})
+    name = name or f"mass{version}{'' if state else '_nostate'}{'_f32' if float32 else ''}"
+    so = compile_binary(out / f"build-{name}", version, state, float32=float32)
+    return write_fmu(out / f"{name}.fmu", model_description(version, state, float32=float32), {PLATFORM[version]: so})
 
 
 def main(argv: list[str] | None = None) -> int:

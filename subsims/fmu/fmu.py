@@ -96,6 +96,25 @@ class FmuInfo:
         }
 
 
+@dataclass(frozen=True)
+class RealPorts:
+    """The value references of a list of real ports, in order, and split by FMI 3 type: a Float32 variable
+    must be read and written with fmi3Get/SetFloat32 (FMI 2 has one Real type)."""
+
+    vrs: tuple[int, ...]
+    f64_vrs: tuple[int, ...]
+    f64_at: tuple[int, ...]  # positions of the Float64 (or FMI 2 Real) ports in ``vrs``
+    f32_vrs: tuple[int, ...]
+    f32_at: tuple[int, ...]
+
+    @classmethod
+    def of(cls, variables: tuple[Variable, ...]) -> RealPorts:
+        f32 = [i for i, v in enumerate(variables) if v.type == "Float32"]
+        f64 = [i for i, v in enumerate(variables) if v.type != "Float32"]
+        return cls(tuple(v.vr for v in variables), tuple(variables[i].vr for i in f64), tuple(f64),
+                   tuple(variables[i].vr for i in f32), tuple(f32))
+
+
 def _one_line(exc: BaseException) -> str:
     text = " ".join(str(exc).split())
     return text[:300] or type(exc).__name__
@@ -344,16 +363,27 @@ class Instance:
             setter = "setInt64" if t == "Enumeration" else f"set{t}"
         self.call(f"setting {var.name}", getattr(self._fmu, setter), [var.vr], [value])
 
-    def set_reals(self, vrs: list[int], values: np.ndarray) -> None:
-        if vrs:
-            setter = self._fmu.setReal if self.major == 2 else self._fmu.setFloat64
-            self.call("setting the inputs", setter, vrs, [float(x) for x in values])
+    def set_reals(self, ports: RealPorts, values: np.ndarray) -> None:
+        if self.major == 2:
+            if ports.vrs:
+                self.call("setting the inputs", self._fmu.setReal, list(ports.vrs), [float(x) for x in values])
+            return
+        for setter, vrs, at in ((self._fmu.setFloat64, ports.f64_vrs, ports.f64_at),
+                                (self._fmu.setFloat32, ports.f32_vrs, ports.f32_at)):
+            if vrs:
+                self.call("setting the inputs", setter, list(vrs), [float(values[i]) for i in at])
 
-    def get_reals(self, vrs: list[int]) -> np.ndarray:
-        if not vrs:
-            return np.empty(0)
-        getter = self._fmu.getReal if self.major == 2 else self._fmu.getFloat64
-        return np.array(self.call("getting the outputs", getter, vrs), dtype=np.float64)
+    def get_reals(self, ports: RealPorts) -> np.ndarray:
+        if self.major == 2:
+            if not ports.vrs:
+                return np.empty(0)
+            return np.array(self.call("getting the outputs", self._fmu.getReal, list(ports.vrs)), dtype=np.float64)
+        out = np.empty(len(ports.vrs))
+        for getter, vrs, at in ((self._fmu.getFloat64, ports.f64_vrs, ports.f64_at),
+                                (self._fmu.getFloat32, ports.f32_vrs, ports.f32_at)):
+            if vrs:
+                out[list(at)] = self.call("getting the outputs", getter, list(vrs))
+        return out
 
     # --- state
     def serialize(self) -> bytes:

@@ -38,7 +38,7 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from cosim.subsim import InputFunction, ModelError, Port, Subsim
-from subsims.fmu.fmu import FmiCallError, FmuError, FmuInfo, Instance, coerce, read_fmu
+from subsims.fmu.fmu import FmiCallError, FmuError, FmuInfo, Instance, RealPorts, coerce, read_fmu
 
 SETTINGS = {"fmu", "interface", "substeps", "solver", "rtol", "atol", "max_step", "tolerance", "state_capacity",
             "start_time", "values"}
@@ -174,8 +174,8 @@ class FmuSubsim(Subsim):
                              "is not supported (use interface = 'cs')")
         self.info, self.kind, self.fmu_path = info, kind, info.path
         self._set_ports(info)
-        self._in_vrs = [v.vr for v in info.inputs]
-        self._out_vrs = [v.vr for v in info.outputs]
+        self._in_ports = RealPorts.of(info.inputs)
+        self._out_ports = RealPorts.of(info.outputs)
         _free(self._holder)
         try:
             inst = Instance(info, kind, self.name)
@@ -249,7 +249,7 @@ class FmuSubsim(Subsim):
     def _input_matrix(self, u: InputFunction, points: np.ndarray) -> np.ndarray:
         """Inputs at ``points`` (k,), one column per FMU input: one call of ``u`` on the array of times where
         the runtime supports it, else one call per point (the subsim API documents both)."""
-        if not self._in_vrs:
+        if not self._in_ports.vrs:
             return np.zeros((points.size, 0))
         names = [v.name for v in self.info.inputs]
         try:
@@ -270,14 +270,14 @@ class FmuSubsim(Subsim):
             fine = [np.linspace(a, b, m + 1)[:-1] for a, b in zip(times[:-1], times[1:])]
             points = np.concatenate([*fine, times[-1:]])
         inputs = self._input_matrix(u, points)
-        out = np.empty((times.size, len(self._out_vrs)))
+        out = np.empty((times.size, len(self._out_ports.vrs)))
         for j in range(points.size - 1):
-            inst.set_reals(self._in_vrs, inputs[j])
+            inst.set_reals(self._in_ports, inputs[j])
             if j % m == 0:
-                out[j // m] = inst.get_reals(self._out_vrs)
+                out[j // m] = inst.get_reals(self._out_ports)
             inst.do_step(float(points[j]), float(points[j + 1] - points[j]))
-        inst.set_reals(self._in_vrs, inputs[-1])
-        out[-1] = inst.get_reals(self._out_vrs)
+        inst.set_reals(self._in_ports, inputs[-1])
+        out[-1] = inst.get_reals(self._out_ports)
         return out
 
     def _advance_me(self, inst: Instance, times: np.ndarray, u: InputFunction) -> np.ndarray:
@@ -286,7 +286,7 @@ class FmuSubsim(Subsim):
 
         def rhs(t: float, x: np.ndarray) -> np.ndarray:
             inst.set_time(t)
-            inst.set_reals(self._in_vrs, self._input_matrix(u, np.array([t]))[0])
+            inst.set_reals(self._in_ports, self._input_matrix(u, np.array([t]))[0])
             inst.set_states(x)
             return inst.get_derivatives(n)
 
@@ -304,13 +304,13 @@ class FmuSubsim(Subsim):
                 raise ModelError(f"solve_ivp ({self.solver}) failed: {sol.message}")
             states = sol.y
         inputs = self._input_matrix(u, np.asarray(times, dtype=np.float64))
-        out = np.empty((times.size, len(self._out_vrs)))
+        out = np.empty((times.size, len(self._out_ports.vrs)))
         for i, t in enumerate(times):
             inst.set_time(float(t))
-            inst.set_reals(self._in_vrs, inputs[i])
+            inst.set_reals(self._in_ports, inputs[i])
             if n:
                 inst.set_states(states[:, i])
-            out[i] = inst.get_reals(self._out_vrs)
+            out[i] = inst.get_reals(self._out_ports)
         if inst.completed_step():
             raise ModelError(f"the FMU asks for event handling at t={t1!r}; model exchange events are not supported "
                              "(use interface = 'cs')")

@@ -26,12 +26,13 @@ def _needs_gcc() -> None:
 @pytest.fixture(scope="session")
 def fmus(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     """``mass2``, ``mass3`` (FMI 2.0 / 3.0, CS + ME, state serialization), ``mass2_nostate``,
-    ``mass3_nostate`` (cannot save state), and broken ones: ``not_zip``, ``no_description``,
-    ``no_binary``, ``other_platform``, ``bad_description``."""
+    ``mass3_nostate`` (cannot save state), ``mass3_f32`` (v and F are Float32), and broken ones:
+    ``not_zip``, ``no_description``, ``no_binary``, ``other_platform``, ``bad_description``."""
     _needs_gcc()
     out = tmp_path_factory.mktemp("fmus")
     built = {f"mass{v}": build_mass.build_mass_fmu(out, v) for v in (2, 3)}
     built.update({f"mass{v}_nostate": build_mass.build_mass_fmu(out, v, state=False) for v in (2, 3)})
+    built["mass3_f32"] = build_mass.build_mass_fmu(out, 3, float32=True)
     so = out / "build-mass2" / "mass.so"
     xml = build_mass.model_description(2)
     (out / "not_zip.fmu").write_bytes(b"this is not a zip archive\n" * 10)

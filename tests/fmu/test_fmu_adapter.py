@@ -100,6 +100,20 @@ def test_cosimulation_with_constant_force_is_exact(fmus: dict[str, Path], versio
         np.testing.assert_allclose(u, forced(t, 0.3, -1.0, a, 0.0), rtol=0, atol=1e-13)
 
 
+@pytest.mark.parametrize("kind", ["cs", "me"])
+def test_float32_ports_are_read_and_written_as_float32(fmus: dict[str, Path], kind: str) -> None:
+    """FMI 3 Float32 variables need fmi3Get/SetFloat32: the test FMU's v and F are Float32 and its Float64
+    calls refuse them, as a strict FMU does. A force of 7 N is exact in float32, so u (Float64) must match
+    the closed form as the all-Float64 FMU does, and v to float32's precision."""
+    rt = configured(fmus["mass3_f32"], interface=kind, u0=0.3, v0=-1.0)
+    t = np.linspace(0.0, 0.4, 5)
+    out = run(rt, t, np.full(5, 7.0))["outputs"]
+    np.testing.assert_allclose(out["u"][:, 0], forced(t, 0.3, -1.0, 7.0, 0.0), rtol=0, atol=1e-7)
+    v = -(0.3 - 7.0 / KS) * W * np.sin(W * t) - 1.0 * np.cos(W * t)  # d/dt of forced()
+    np.testing.assert_allclose(out["v"][:, 0], v, rtol=0, atol=1e-5)
+    assert np.all(out["v"][:, 0] == out["v"][:, 0].astype(np.float32))  # it came through a float32
+
+
 @pytest.mark.parametrize("version", [2, 3])
 def test_model_exchange_reads_inputs_between_samples(fmus: dict[str, Path], version: int) -> None:
     """A ramp force is represented exactly by linear interpolation of its samples, so the ME subsim (scipy

@@ -76,12 +76,20 @@ fmi3Status fmi3Reset(fmi3Instance c) {
     return fmi3OK;
 }
 
+/* Built with MASS_F32, v (value reference 2) and F (3) are Float32 variables: like a strict FMU, the Float64
+   calls refuse them and the Float32 calls take only them. */
+#ifndef MASS_F32
+#define MASS_F32 0
+#endif
+static int is_f32(fmi3ValueReference vr) { return MASS_F32 && (vr == 2 || vr == 3); }
+
 fmi3Status fmi3GetFloat64(fmi3Instance c, const fmi3ValueReference vr[], size_t n, fmi3Float64 values[],
                           size_t nValues) {
     Instance *inst = c;
     if (nValues != n) return fail(inst, "scalar variables only");
     for (size_t i = 0; i < n; i++) {
         if (vr[i] == 0) { values[i] = inst->d.time; continue; }
+        if (is_f32(vr[i])) return fail(inst, "fmi3GetFloat64 called for a Float32 variable");
         if (mass_get(&inst->d, vr[i] - 1, &values[i]) != 0) return fail(inst, "unknown value reference");
     }
     return fmi3OK;
@@ -91,8 +99,34 @@ fmi3Status fmi3SetFloat64(fmi3Instance c, const fmi3ValueReference vr[], size_t 
                           size_t nValues) {
     Instance *inst = c;
     if (nValues != n) return fail(inst, "scalar variables only");
-    for (size_t i = 0; i < n; i++)
+    for (size_t i = 0; i < n; i++) {
+        if (is_f32(vr[i])) return fail(inst, "fmi3SetFloat64 called for a Float32 variable");
         if (vr[i] == 0 || mass_set(&inst->d, vr[i] - 1, values[i]) != 0) return fail(inst, "cannot be set now");
+    }
+    return fmi3OK;
+}
+
+fmi3Status fmi3GetFloat32(fmi3Instance c, const fmi3ValueReference vr[], size_t n, fmi3Float32 values[],
+                          size_t nValues) {
+    Instance *inst = c;
+    if (nValues != n) return fail(inst, "scalar variables only");
+    for (size_t i = 0; i < n; i++) {
+        double x;
+        if (!is_f32(vr[i])) return fail(inst, "fmi3GetFloat32 called for a variable that is not Float32");
+        if (mass_get(&inst->d, vr[i] - 1, &x) != 0) return fail(inst, "unknown value reference");
+        values[i] = (fmi3Float32)x;
+    }
+    return fmi3OK;
+}
+
+fmi3Status fmi3SetFloat32(fmi3Instance c, const fmi3ValueReference vr[], size_t n, const fmi3Float32 values[],
+                          size_t nValues) {
+    Instance *inst = c;
+    if (nValues != n) return fail(inst, "scalar variables only");
+    for (size_t i = 0; i < n; i++) {
+        if (!is_f32(vr[i])) return fail(inst, "fmi3SetFloat32 called for a variable that is not Float32");
+        if (mass_set(&inst->d, vr[i] - 1, (double)values[i]) != 0) return fail(inst, "cannot be set now");
+    }
     return fmi3OK;
 }
 
