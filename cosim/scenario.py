@@ -192,6 +192,17 @@ class Scenario:
         return self.settings[method]
 
 
+def check_subsim_name(name: str) -> str:
+    """A scenario's subsim name: a bus name (``check_name``) without '.', which separates a subsim from its
+    port in signal names (``subsim.port``). ValueError in one line."""
+    check_name(name, "subsim name")
+    if "." in name:
+        raise ValueError(f"subsim name {name!r} has a '.', which separates a subsim from its port in signal "
+                         f"names ('{name}.<port>' would read as subsim {name.partition('.')[0]!r}); "
+                         f"use '_' or '-' instead")
+    return name
+
+
 def _plugins(group: str) -> dict[str, Any]:
     """Entry points of ``group`` by name (other packages extend the loader without the loader importing them)."""
     return {ep.name: ep for ep in entry_points(group=group)}
@@ -296,7 +307,7 @@ class _Parser:
     def subsim(self, name: str, spec: Any) -> SubsimSpec:
         key = f"subsims.{name}"
         try:
-            check_name(name, "subsim name")
+            check_subsim_name(name)
         except ValueError as exc:
             raise self.fail(key, str(exc)) from None
         if not isinstance(spec, dict):

@@ -65,6 +65,7 @@ def test_good_scenario_loads_with_per_method_settings(tmp_path: Path) -> None:
         ("stop = 1.0", "stop = -1.0", "stop", "after start"),
         ("stop = 1.0", 'stop = 1.0\n[unified]\nfuncton = "m:f"', "unified", "unknown key(s) ['funct"),
         ('[subsims.b]\nmodel = "subsims.integrator.subsim:Integrator"', "[subsims.b]", "subsims.b", "needs model"),
+        ("[subsims.b]", '[subsims."b.1"]', "subsims.b.1", "has a '.', which separates a subsim from its port"),
         # values of the wrong type: refused by key, never a bare TypeError or AttributeError
         ('to = "b.u"', "to = 3", "couplings[1].to", "must be a string, got 3"),
         ('from = ["a.y"]', 'from = ["a.y", 4]', "couplings[1].from", "must be a 'subsim.port' string or a list"),

@@ -24,7 +24,7 @@ from collections.abc import Mapping
 from pathlib import Path, PurePosixPath
 from typing import Any
 
-from cosim.scenario import ScenarioError
+from cosim.scenario import ScenarioError, check_subsim_name
 
 MODEL = "subsims.fmu:FmuSubsim"
 FMU_TYPES = {"application/x-fmu-sharedlibrary", None}
@@ -157,6 +157,10 @@ def read_ssp(path: str | Path) -> dict[str, Any]:
                 raise ScenarioError(f"{path}: nested system {name!r} is not supported (flatten it)")
             if kind != "Component":
                 raise ScenarioError(f"{where}: element {kind} is not supported")
+            try:  # before its name becomes a directory below
+                check_subsim_name(name)
+            except ValueError as exc:
+                raise ScenarioError(f"{where}: {exc}") from None
             source = comp.get("source", "")
             if comp.get("type") not in FMU_TYPES or not source.lower().endswith(".fmu"):
                 raise ScenarioError(f"{where}: only FMU components are supported (type "
@@ -174,8 +178,6 @@ def read_ssp(path: str | Path) -> dict[str, Any]:
             for binding in _children(bindings, "ParameterBinding") if bindings is not None else []:
                 params.update(_parameters(binding, zf, where))
             params["fmu"] = str(fmu)
-            if raw.get("start", 0.0) != 0.0:
-                params["start_time"] = raw["start"]
             raw["subsims"][name] = {"model": MODEL, "params": params}
         connections = _child(system, "Connections")
         for conn in _children(connections, "Connection") if connections is not None else []:
@@ -198,6 +200,10 @@ def read_ssp(path: str | Path) -> dict[str, Any]:
     if not raw["subsims"]:
         raise ScenarioError(f"{path}: the system has no FMU components")
     raw = _with_companion(raw, path)
+    start = raw.get("start", 0.0)
+    if isinstance(start, (int, float)) and start != 0.0:  # the FMUs start where the run does (a bad one: parse says)
+        for table in raw["subsims"].values():
+            table["params"].setdefault("start_time", start)
     if "stop" not in raw:
         raise ScenarioError(f"{path}: no stop time: give DefaultExperiment stopTime in the SSD or stop = ... in "
                             f"{path.with_suffix('.toml').name} beside it")

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import os
 import shutil
+import tempfile
 import zipfile
 from pathlib import Path
 
@@ -171,3 +173,36 @@ def test_fmu_shorthand_resolves_against_the_scenario_and_refuses_model_too(tmp_p
     path.write_text('stop = 1.0\n[subsims.a]\nfmu = "m.fmu"\nmodel = "subsims.fmu:FmuSubsim"\n')
     with pytest.raises(ScenarioError, match=r"\[subsims.a\] give fmu or model, not both"):
         load(path)
+
+
+
+@pytest.mark.parametrize("name", ["../../cosim-test-escaped", "mass.1"])
+def test_a_component_name_that_is_no_subsim_name_is_refused_before_anything_is_written(
+    tmp_path: Path, fmus: dict[str, Path], name: str
+) -> None:
+    """The component's name becomes the directory its FMU is extracted to (in the temporary directory): a
+    name with '../' wrote the FMU outside it before the name was checked. A name with '.' could not be
+    coupled (signal names are 'subsim.port')."""
+    name = name.replace("escaped", f"escaped-{os.getpid()}")
+    escaped = Path(tempfile.gettempdir()) / f"cosim-test-escaped-{os.getpid()}"
+    ssp = write_ssp(tmp_path / "system.ssp", ssd(component(name, ""), ""), fmus["mass2"])
+    with pytest.raises(ScenarioError) as err:
+        read_ssp(ssp)
+    assert f"component {name!r}: subsim name {name!r}" in str(err.value) and "\n" not in str(err.value)
+    assert not escaped.exists()
+
+
+def test_the_companions_start_reaches_every_fmu(tmp_path: Path, fmus: dict[str, Path]) -> None:
+    """A companion ``start`` overrides DefaultExperiment's, for the FMUs too: each is initialized there
+    (they were initialized at DefaultExperiment's start, and a strict FMU refused the first step)."""
+    ssv = {"resources/mass2.ssv": parameter_set({"mass2.m": 1.0, "mass2.k": K})}
+    ssp = write_ssp(tmp_path / "system.ssp", oscillator_ssd(), fmus["mass2"], ssv)
+    (tmp_path / "system.toml").write_text("start = 0.25\n" + COMPANION)
+    raw = read_ssp(ssp)
+    assert raw["start"] == 0.25
+    assert {n: s["params"]["start_time"] for n, s in raw["subsims"].items()} == {"mass1": 0.25, "mass2": 0.25}
+    late = ssd(component("mass1", ""), "", '<ssd:DefaultExperiment startTime="0.5" stopTime="1"/>')
+    ssp = write_ssp(tmp_path / "late.ssp", late, fmus["mass2"])
+    (tmp_path / "late.toml").write_text("start = 0.0\n" + COMPANION)
+    raw = read_ssp(ssp)
+    assert raw["start"] == 0.0 and "start_time" not in raw["subsims"]["mass1"]["params"]
