@@ -17,6 +17,7 @@ ends at its last whole interval. See :mod:`cosim.outputs` for the names, locks a
 from __future__ import annotations
 
 import csv
+import io
 import json
 import warnings
 from collections.abc import Iterator, Mapping, Sequence
@@ -101,7 +102,7 @@ class ResultWriter:
                 meta = {"format": "cosim results", "columns": self.columns, "units": self.units}
                 atomic_write(meta_path(self.path), lambda f: f.write(json.dumps(meta, indent=1).encode() + b"\n"))
                 self._data = AppendFile(self.path, "results")
-                self._data.append((",".join(self.columns) + "\n").encode())
+                self._data.append(_csv_header(self.columns).encode())
             self._diag = AppendFile(diag_path(self.path), "diagnostics")
             self._diag.append((",".join(DIAG_COLUMNS) + "\n").encode())
         except BaseException:  # nothing of this run is in the files yet: leave none behind
@@ -195,6 +196,13 @@ class ResultWriter:
         for f in (self._data, self._diag):
             if f is not None:
                 f.close(sync=not self.failed)
+
+
+def _csv_header(columns: list[str]) -> str:
+    """The header line, quoted where a name needs it (an FMU port may be named 'a,b')."""
+    text = io.StringIO()
+    csv.writer(text, lineterminator="\n").writerow(columns)
+    return text.getvalue()
 
 
 def _fmt(row: list[float]) -> str:

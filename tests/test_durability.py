@@ -425,6 +425,22 @@ def test_units_from_port_declarations_are_stored_with_both_formats(tmp_path: Pat
     assert meta["columns"] == read_results(tmp_path / "u.csv")[0]
 
 
+def test_a_port_name_with_a_comma_reads_back_as_one_column(tmp_path: Path) -> None:
+    """A port may be named 'a,b' (a quoted Modelica name in an FMU): the CSV header quotes it, so the file
+    reads back with one name per column (it had one more name than columns)."""
+    from cosim.coupler.couplings import SignalRef
+    from cosim.coupler.relaxation import Interval
+
+    out = tmp_path / "comma.csv"
+    writer = ResultWriter(out, [(SignalRef("m", "a,b"), 1), (SignalRef("m", 'say "x"'), 2)])
+    t = np.array([0.0, 0.5, 1.0])
+    writer.write(Interval(t, {"m": {"a,b": t[:, None] * 2, 'say "x"': np.ones((3, 2))}}, {}, 1, {}))
+    writer.close()
+    columns, data = read_results(out)
+    assert columns == ["time", "m.a,b[0]", 'm.say "x"[0]', 'm.say "x"[1]']
+    assert data.shape == (3, 4) and data[:, 1].tolist() == [0.0, 1.0, 2.0]
+
+
 # --- C. CLI rough edges ------------------------------------------------------------------------------
 
 @pytest.mark.parametrize("stop", ["-1", "0", "nan", "inf"])
