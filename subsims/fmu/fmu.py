@@ -9,10 +9,8 @@ with a one-line message.
 
 from __future__ import annotations
 
-import atexit
 import ctypes
 import os
-import shutil
 import tempfile
 import zipfile
 from dataclasses import dataclass
@@ -20,6 +18,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from subsims.fmu.scratch import process_dir
 
 try:
     import fmpy
@@ -200,20 +200,16 @@ def read_fmu(path: str | os.PathLike) -> FmuInfo:
     )
 
 
-# --- extraction: one directory per FMU file and process, removed at exit ---------------------------
+# --- extraction: one directory per FMU file and process, removed at exit (or by a later process) -----
 
 _EXTRACTED: dict[tuple[str, int, int], str] = {}
-_TMP_ROOT: list[str] = []
 
 
 def extracted(info: FmuInfo) -> str:
     st = info.path.stat()
     key = (str(info.path), st.st_mtime_ns, st.st_size)
     if key not in _EXTRACTED:
-        if not _TMP_ROOT:
-            _TMP_ROOT.append(tempfile.mkdtemp(prefix="cosim-fmu-"))
-            atexit.register(shutil.rmtree, _TMP_ROOT[0], True)
-        target = tempfile.mkdtemp(dir=_TMP_ROOT[0])
+        target = tempfile.mkdtemp(dir=process_dir("cosim-fmu-"))
         try:
             fmpy.extract(str(info.path), target)
         except Exception as exc:

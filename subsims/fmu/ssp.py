@@ -14,8 +14,6 @@ dictionaries, components that are not FMUs, transformations other than linear on
 
 from __future__ import annotations
 
-import atexit
-import shutil
 import tempfile
 import tomllib
 import xml.etree.ElementTree as ET
@@ -25,6 +23,7 @@ from pathlib import Path, PurePosixPath
 from typing import Any
 
 from cosim.scenario import ScenarioError, check_subsim_name
+from subsims.fmu.scratch import process_dir
 
 MODEL = "subsims.fmu:FmuSubsim"
 FMU_TYPES = {"application/x-fmu-sharedlibrary", None}
@@ -63,14 +62,8 @@ def _child(elem: ET.Element, name: str) -> ET.Element | None:
     return found[0] if found else None
 
 
-_EXTRACTED: list[str] = []
-
-
 def _extract_dir() -> Path:
-    if not _EXTRACTED:
-        _EXTRACTED.append(tempfile.mkdtemp(prefix="cosim-ssp-"))
-        atexit.register(shutil.rmtree, _EXTRACTED[0], True)
-    return Path(tempfile.mkdtemp(dir=_EXTRACTED[0]))
+    return Path(tempfile.mkdtemp(dir=process_dir("cosim-ssp-")))
 
 
 def _value(param: ET.Element, where: str) -> Any:
