@@ -43,7 +43,10 @@ def expand_fmu(spec: Mapping[str, Any], scenario: Path, start: float, key: str) 
     params = table.get("params", {})
     if not isinstance(params, dict):
         raise ScenarioError(f"{scenario}: [{key}.params] must be a table")
-    params = {**params, "fmu": str((scenario.parent / fmu).resolve())}
+    resolved = (scenario.parent / fmu).resolve()
+    if not table.get("external", False) and not resolved.is_file():  # launched here: a typo, found before launch
+        raise ScenarioError(f"{scenario}: [{key}.fmu] no such file: {resolved}")
+    params = {**params, "fmu": str(resolved)}
     if start != 0.0:
         params.setdefault("start_time", start)
     return {**table, "model": MODEL, "params": params}
