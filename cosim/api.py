@@ -106,7 +106,8 @@ def run(
     ``"distributed"`` or ``"unified"`` (default: the scenario's). ``stop``: overrides the scenario's.
     ``params``: ``{subsim: {parameter: value}}`` merged over the scenario's (a variant without a new
     file). ``output``: also write the result file (.csv or .npz) and its diagnostics. The other
-    arguments are those of ``cosim run``. Raises ``ScenarioError``, ``SubsimError``, ``NotConverged``.
+    arguments are those of ``cosim run``. Raises ``ScenarioError``, ``SubsimError``, ``NotConverged``,
+    ``TransformError``.
     """
     sc = scenario if isinstance(scenario, Scenario) else load(scenario)
     if params:

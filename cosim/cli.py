@@ -10,6 +10,7 @@ from pathlib import Path
 
 from cosim import __version__, interrupt
 from cosim.contract import SubsimError
+from cosim.coupler.couplings import TransformError
 from cosim.coupler.relaxation import METHODS, Interval, NotConverged
 from cosim.outputs import OutputError, OutputWriteError
 from cosim.preflight import UsageError, check_listen, check_run_options, check_stop, zenoh_error_line
@@ -262,7 +263,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         line = zenoh_error_line(exc, getattr(args, "listen", None) or "")
         print(f"cosim: {line}", file=sys.stderr)
         return 2 if line.startswith("--listen") else 1
-    except NotConverged as exc:
+    except (NotConverged, TransformError) as exc:
         print(f"cosim: run stopped: {exc}", file=sys.stderr)
         return 1
     except SubsimError as exc:

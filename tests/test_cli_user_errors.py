@@ -25,6 +25,15 @@ COSIM = [sys.executable, "-m", "cosim.cli"]
      'params = { m = "1.0", k = 197.39208802178717, u0 = 1.0,',
      ["[subsims.mass1.params]", "parameter 'm' must be a number (its default is 1.0), got the string '1.0'",
       "without quotes"]),
+    # a transform's parameter misspelled, and gains that do not fit the signals: found before the run
+    ('params = { k = 157.91367041742973 }\n\n[[couplings]]', 'params = { kk = 157.91367041742973 }\n\n[[couplings]]',
+     ["[couplings[0]]", "transform 'gain'", "unexpected keyword argument 'kk'"]),
+    ('params = { k = 157.91367041742973 }\n\n[[couplings]]', 'params = { k = [[1.0], [2.0]] }\n\n[[couplings]]',
+     ["[couplings[0]]", "mass2.u -> mass1.F: transform 'gain' turns 2 samples of mass2.u (1 wide) into shape (2, 2)",
+      "input mass1.F takes 1 per sample"]),
+    ('transform = "gain"\nparams = { k = 157.91367041742973 }\n\n[[couplings]]',
+     'transform = "linear"\nparams = { gains = [1.0, 2.0] }\n\n[[couplings]]',
+     ["[couplings[0]]", "transform 'linear': linear: 1 sources need 1 gains, got 2"]),
     # a misspelled table name that breaks the TOML itself
     ('[[couplings]]\nto = "mass2.F"', '[[coupling]]\nto = "mass2.F"', ["not valid TOML", "line 37"]),
 ])
@@ -40,6 +49,33 @@ def test_a_mistake_in_the_scenario_is_one_line_naming_it(tmp_path: Path, old: st
     assert len(lines) == 1 and lines[0].startswith("cosim: "), done.stderr
     assert all(w in lines[0] for w in words), lines[0]
     assert "Traceback" not in done.stderr
+
+
+def test_a_transform_failing_in_a_run_stops_it_in_one_line_keeping_what_was_committed(tmp_path: Path) -> None:
+    """A user's transform that fails only on some values (not on the trial call before the run): the run
+    stops with one line naming the coupling and the error (it was a raw traceback), exit 1, and the
+    committed intervals stay in the results."""
+    (tmp_path / "picky.py").write_text(
+        "import numpy as np\n\n\ndef picky(x, k, limit):\n"
+        "    if np.abs(x).max() > limit:\n        raise ValueError(f'|x| = {np.abs(x).max():.2f} is past {limit}')\n"
+        "    return k * x\n")
+    text = OSCILLATOR.read_text()
+    old = 'transform = "gain"\nparams = { k = 157.91367041742973 }\n\n[[couplings]]'
+    assert old in text
+    sc = tmp_path / "s.toml"
+    sc.write_text(text.replace(old, 'transform = "picky:picky"\nparams = { k = 157.91367041742973, limit = 0.6 }'
+                                    '\n\n[[couplings]]', 1))
+    out = tmp_path / "x.csv"
+    for where in (["--inprocess"], []):
+        done = subprocess.run([*COSIM, "run", str(sc), *where, "--quiet", "--output", str(out), "--overwrite"],
+                              capture_output=True, text=True, timeout=120, cwd=tmp_path)
+        lines = [x for x in done.stderr.strip().splitlines() if ": serving run " not in x]  # subsims started
+        assert done.returncode == 1 and len(lines) == 1 and "Traceback" not in done.stderr, done.stderr
+        assert lines[0].startswith("cosim: run stopped: coupling mass2.u -> mass1.F: transform 'picky:picky' "
+                                   "failed: |x| = "), lines[0]
+        assert lines[0].endswith("is past 0.6"), lines[0]
+        rows = out.read_text().splitlines()[1:]
+        assert len(rows) > 5 and all(abs(float(r.split(",")[3])) <= 0.6 for r in rows)  # mass2.u
 
 
 def test_an_input_fed_by_no_coupling_is_refused_unless_held(tmp_path: Path) -> None:

@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from cosim.transforms import Transform, identity, resolve
+from cosim.transforms import BUILTIN, Transform, identity, resolve
 
 _F8 = np.dtype(np.float64)
 
@@ -56,19 +56,19 @@ class Coupling:
         )
 
     def evaluate(self, outputs: Signals, size: int, n: int) -> np.ndarray:
-        """The target's samples (n, size) from the sources' samples in ``outputs``."""
+        """The target's samples (n, size) from the sources' samples in ``outputs``. TransformError in one line."""
         args = [outputs[s.subsim][s.port] for s in self.sources]
         try:
             value = self.transform(*args, **self.params)
             if type(value) is not np.ndarray or value.dtype != _F8:
                 value = np.asarray(value, dtype=np.float64)
         except Exception as exc:
-            raise ValueError(f"coupling {self}: transform {self.transform_name!r} failed: {exc}") from exc
+            raise TransformError(f"coupling {self}: transform {self.transform_name!r} failed: {exc}") from exc
         if value.shape != (n, size):
             name = self.transform_name
-            raise ValueError(f"coupling {self}: transform {name!r} gave shape {value.shape}, need ({n}, {size})")
+            raise TransformError(f"coupling {self}: transform {name!r} gave shape {value.shape}, need ({n}, {size})")
         if np.count_nonzero(np.isfinite(value)) != value.size:  # not .all(): its Python wrapper costs more
-            raise ValueError(f"coupling {self}: transform {self.transform_name!r} produced NaN or inf")
+            raise TransformError(f"coupling {self}: transform {self.transform_name!r} produced NaN or inf")
         return value
 
     def as_table(self) -> dict[str, Any]:
@@ -81,6 +81,10 @@ class Coupling:
 
 
 Ports = Mapping[str, Mapping[str, int]]  # subsim -> port -> width
+
+
+class TransformError(ValueError):
+    """A coupling's transform failed on a stage's samples, or gave the wrong shape or a NaN: one line."""
 
 
 class CouplingError(ValueError):
@@ -123,6 +127,27 @@ def _check_one(c: Coupling, inputs: Ports, outputs: Ports, driven: dict[SignalRe
         src, dst = outputs[c.sources[0].subsim][c.sources[0].port], inputs[c.target.subsim][c.target.port]
         if src != dst:
             raise ValueError(f"coupling {c}: size mismatch, output has {src}, input takes {dst}")
+        return
+    _try_transform(c, inputs, outputs)
+
+
+def _try_transform(c: Coupling, inputs: Ports, outputs: Ports) -> None:
+    """Call the transform once on samples of the sources' sizes (all ones), before any run: wrong parameters
+    and a result of the wrong width show here. A user's transform may also fail for reasons that depend on the
+    values, which only a run has: of its errors only a TypeError (a parameter it does not take or lacks) counts."""
+    args = [np.ones((2, outputs[s.subsim][s.port])) for s in c.sources]
+    size = inputs[c.target.subsim][c.target.port]
+    try:
+        value = c.transform(*args, **c.params)
+    except Exception as exc:
+        if isinstance(exc, TypeError) or c.transform in BUILTIN.values():
+            raise ValueError(f"coupling {c}: transform {c.transform_name!r}: {exc}") from None
+        return
+    shape = np.shape(value)
+    if shape != (2, size):
+        widths = ", ".join(f"{s} ({outputs[s.subsim][s.port]} wide)" for s in c.sources)
+        raise ValueError(f"coupling {c}: transform {c.transform_name!r} turns 2 samples of {widths} into shape "
+                         f"{shape}; input {c.target} takes {size} per sample: (2, {size})")
 
 
 def feedback_weight(order: Sequence[str], couplings: Sequence[Coupling], sizes: Mapping[SignalRef, int]) -> int:
