@@ -185,11 +185,15 @@ class Runtime:
             raise CosimError("bad_value", f"interp: unknown scheme {interp!r}; known: {', '.join(SCHEMES)}")
         u = self._input_function(times, inputs, interp)
         try:
-            outputs, end_state = self.model.advance(state, times, u)
+            result = self.model.advance(state, times, u)
         except ModelError as exc:
             raise CosimError("model_error", f"at t in [{times[0]}, {times[-1]}]: {exc}") from None
         except Exception as exc:
             raise _model_exception("advance", exc) from None
+        if type(result) is not tuple or len(result) != 2:
+            got = f"a tuple of {len(result)}" if isinstance(result, tuple) else type(result).__name__
+            raise CosimError("model_error", f"advance() must return (outputs, end_state), got {got}")
+        outputs, end_state = result
         checked = self._check_outputs(outputs, times)
         end_state = self._check_state(end_state, state.size, "advance() returned end state", from_model=True)
         if trial is not None:

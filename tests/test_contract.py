@@ -194,6 +194,27 @@ def test_a_bad_end_state_from_the_model_is_not_the_callers_fault(end_state, code
         h.commit()
 
 
+@pytest.mark.parametrize(("result", "message"), [
+    (lambda out, end: out, "advance() must return (outputs, end_state), got dict"),  # the end state forgotten
+    (lambda out, end: (out,), "advance() must return (outputs, end_state), got a tuple of 1"),
+    (lambda out, end: [out, end], "advance() must return (outputs, end_state), got list"),
+])
+def test_advance_must_return_outputs_and_end_state(result, message: str) -> None:
+    """A forgotten end state was reported as the model raising 'not enough values to unpack', or as
+    outputs that are not a map (the dict's keys unpacked)."""
+    class Broken(Integrator):
+        def advance(self, state, times, u):
+            return result(*super().advance(state, times, u))
+
+    h = InProcessHandle(Broken(), name="broken")
+    h.configure({"size": 2})
+    before = committed(h)
+    with pytest.raises(SubsimError) as err:
+        h.run_interval(TIMES, ramp(TIMES))
+    assert (err.value.code, err.value.message) == ("model_error", message)
+    assert committed(h) == before
+
+
 @pytest.mark.parametrize(("outputs", "message"), [
     (lambda n: {}, "advance() did not return output 'y'"),
     (lambda n: {"y": np.zeros((n - 1, 2))}, f"advance() output 'y' has shape ({N - 1}, 2), expected ({N}, 2)"),
