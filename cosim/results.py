@@ -175,12 +175,18 @@ class ResultWriter:
             where += f", kept in {stream_path(self.path)} (`cosim recover {self.path}` builds the NPZ)"
         return where
 
-    def close(self) -> None:
+    def close(self, failed_run: bool = False) -> None:
         """Finish every file (the NPZ from its stream, atomically) and release the lock. After a write
-        error the NPZ is not attempted: its stream stays for ``cosim recover``."""
+        error the NPZ is not attempted: its stream stays for ``cosim recover``. ``failed_run``: the run stopped
+        on an error; if it committed no interval, its files (headers only) are removed, so that running it
+        again after a fix needs no ``--overwrite``."""
         with interrupt.deferred():
             try:
                 self._close_files()
+                if failed_run and self._count == 0:
+                    for path in (self.path, stream_path(self.path), diag_path(self.path), meta_path(self.path)):
+                        path.unlink(missing_ok=True)
+                    return
                 if self._npz and not self.failed:
                     _, _, data = read_stream(stream_path(self.path))
                     try:

@@ -263,9 +263,12 @@ def run_scenario(
 
         try:
             summary = coordinator.run(scenario.start, stop, each)
-        finally:
-            writer.close()
+        except BaseException:
+            writer.close(failed_run=True)
             bar.done()
+            raise
+        writer.close()
+        bar.done()
         return RunReport(method, summary, output, diag_path(output), coordinator.order,
                          [str(c) for c in coordinator.feedback], {"restarts": coordinator.restarts})
     finally:

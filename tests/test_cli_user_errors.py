@@ -76,6 +76,14 @@ def test_a_transform_failing_in_a_run_stops_it_in_one_line_keeping_what_was_comm
         assert lines[0].endswith("is past 0.6"), lines[0]
         rows = out.read_text().splitlines()[1:]
         assert len(rows) > 5 and all(abs(float(r.split(",")[3])) <= 0.6 for r in rows)  # mass2.u
+    # failing in the first interval: no file is left (headers only), so a second try needs no --overwrite
+    sc.write_text(sc.read_text().replace("limit = 0.6", "limit = -1.0"))
+    out.unlink()
+    for _ in range(2):
+        done = subprocess.run([*COSIM, "run", str(sc), "--quiet", "--output", str(out)], capture_output=True,
+                              text=True, timeout=120, cwd=tmp_path)
+        assert done.returncode == 1 and "is past -1.0" in done.stderr and "exists" not in done.stderr, done.stderr
+        assert sorted(p.name for p in tmp_path.iterdir() if p.name.startswith("x.")) == []
 
 
 def test_an_input_fed_by_no_coupling_is_refused_unless_held(tmp_path: Path) -> None:
