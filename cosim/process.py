@@ -35,8 +35,16 @@ class _Stop(BaseException):
     """Raised in the main thread by SIGTERM/SIGINT (delivered while ``recv`` waits)."""
 
 
+_why_stopping: list[str] = []  # why this process sent itself SIGTERM, when it did
+
+
 def _raise_stop(signum: int, frame: object) -> None:
-    raise _Stop(signal.Signals(signum).name)
+    raise _Stop(_why_stopping[0] if _why_stopping else f"on {signal.Signals(signum).name}")
+
+
+def _stop_self(why: str) -> None:
+    _why_stopping.append(why)
+    os.kill(os.getpid(), signal.SIGTERM)
 
 
 def _seconds(text: str) -> float:
@@ -115,7 +123,7 @@ def _watch_router(session: zenoh.Session, grace: float = 2.0) -> None:
         now = time.monotonic()
         lost_since = None if connected else (lost_since or now)
         if lost_since is not None and now - lost_since >= grace:
-            os.kill(os.getpid(), signal.SIGTERM)
+            _stop_self(f"as the coordinator's router has been unreachable for {grace:g} s")
             return
 
 
@@ -137,13 +145,13 @@ def main(model_cls: type[Subsim] | Subsim, argv: Sequence[str] | None = None, pr
             return 2
     except _Stop as why:  # also one that arrived while zenoh.open held it, raised in the handler above
         if not args.quiet_stop:
-            print(f"{args.name}: stopping on {why}", file=sys.stderr)
+            print(f"{args.name}: stopping {why}", file=sys.stderr)
         return 0
     server: CommandServer | None = None
     try:
         try:  # a signal may come at any point from here on, even before serving starts (it is ready to be seen)
             server = CommandServer(
-                session, args.run, runtime, on_coordinator_lost=lambda: os.kill(os.getpid(), signal.SIGTERM),
+                session, args.run, runtime, on_coordinator_lost=lambda: _stop_self("as the coordinator left"),
                 key=args.security.key, max_request=args.max_request, queue_size=args.queue,
             )
             threading.Thread(target=_watch_router, args=(session,), daemon=True, name="router-watch").start()
@@ -153,7 +161,7 @@ def main(model_cls: type[Subsim] | Subsim, argv: Sequence[str] | None = None, pr
                 print(f"{args.name}: shutdown requested by the coordinator", file=sys.stderr)
         except _Stop as why:
             if not args.quiet_stop:
-                print(f"{args.name}: stopping on {why}", file=sys.stderr)
+                print(f"{args.name}: stopping {why}", file=sys.stderr)
         finally:
             # leaving anyway: a SIGTERM now (e.g. the coordinator's token deleted right after our shutdown
             # reply) must not interrupt the clean-up and turn exit code 0 into a traceback

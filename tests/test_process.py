@@ -76,11 +76,13 @@ def test_a_signal_before_serving_starts_still_exits_with_code_0(cosim_bus: Bus, 
 def test_subsim_exits_when_the_coordinator_goes_away() -> None:
     bus = Bus.open()
     popen = subprocess.Popen(subsim_command("subsims.integrator", bus.endpoint, bus.run, "orphan"),
-                             env={**os.environ, **bus.subsim_env("orphan")})
+                             env={**os.environ, **bus.subsim_env("orphan")}, stderr=subprocess.PIPE, text=True)
     try:
         bus.attach("orphan")
         bus.session.close()
         assert popen.wait(10) == 0
+        err = popen.stderr.read()  # it says why it stops: it was 'stopping on SIGTERM', a signal it sent itself
+        assert "orphan: stopping as the coordinator" in err and "SIGTERM" not in err, err
     finally:
         if popen.poll() is None:
             popen.kill()

@@ -160,7 +160,9 @@ class RemoteHandle(SubsimHandle):
         """Wait for the liveliness token and a first answered ``status`` (declarations propagate late)."""
         deadline = time.monotonic() + timeout
         if not self.wait_alive(timeout):
-            raise SubsimError("no_responder", f"no process appeared within {timeout:g} s", self.name, "connect")
+            raise SubsimError("no_responder", f"no process appeared within {timeout:g} s (none serves run "
+                                              f"{self.run!r} as {self.name!r}: check its --run and --name)",
+                              self.name, "connect")
         while True:
             seq, frame = self._seal(encode_request("status"))
             replies = self.session.get(self._key, payload=frame, timeout=1.0, target=EVERY_QUERYABLE,
