@@ -241,11 +241,16 @@ def build_parser() -> argparse.ArgumentParser:
                                     "last row. Refused while a run writes PATH.")
     rc.add_argument("path", type=Path, help="the result file (.csv or .npz) the killed run was writing")
     rc.set_defaults(fn=_recover)
+    for command in sub.choices.values():  # its own usage for a mistake in its arguments, not the top-level one
+        command.set_defaults(parser=command)
     return p
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args, extra = parser.parse_known_args(argv)
+    if extra:
+        args.parser.error(f"unrecognized arguments: {' '.join(extra)}")
     try:
         status = args.fn(args)
         sys.stdout.flush()  # a closed pipe shows here, not at exit

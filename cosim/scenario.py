@@ -9,6 +9,7 @@ tested against it).
 
 from __future__ import annotations
 
+import difflib
 import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
@@ -270,10 +271,17 @@ class _Parser:
     def known(self, table: Mapping, allowed: set[str], key: str) -> None:
         extra = sorted(set(table) - allowed)
         if extra:
-            raise self.fail(key, f"unknown key(s) {extra}; allowed: {sorted(allowed)}")
+            close = {k: m[0] for k in extra if (m := difflib.get_close_matches(str(k), sorted(allowed), n=1))}
+            if len(extra) == 1 and close:
+                hint = f" (did you mean {close[extra[0]]!r}?)"
+            else:
+                hint = f" (did you mean {', '.join(f'{m!r} for {k!r}' for k, m in close.items())}?)" if close else ""
+            raise self.fail(key, f"unknown key(s) {extra}{hint}; allowed: {sorted(allowed)}")
 
     def number(self, table: Mapping, key: str, default: float | None = None, where: str = "") -> float:
         v = table.get(key, default)
+        if v is None:
+            raise self.fail(f"{where}.{key}" if where else key, f"is required: {key} = <a number>")
         if isinstance(v, bool) or not isinstance(v, (int, float)):
             raise self.fail(f"{where}.{key}" if where else key, f"must be a number, got {v!r}")
         return float(v)

@@ -138,6 +138,16 @@ def test_a_bad_option_value_is_refused_naming_the_option(tmp_path: Path, args: l
     assert not (tmp_path / "results").exists()  # refused before anything ran
 
 
+@pytest.mark.parametrize("command", ["run", "describe", "plot"])
+def test_a_misspelled_option_shows_the_usage_of_its_own_command(tmp_path: Path, command: str) -> None:
+    """Not the top-level ``cosim`` usage, which lists none of the command's options."""
+    done = subprocess.run([*COSIM, command, str(OSCILLATOR), "--stopp", "3"], capture_output=True, text=True,
+                          timeout=60, cwd=tmp_path)
+    assert done.returncode == 2
+    assert done.stderr.startswith(f"usage: cosim {command} ")
+    assert done.stderr.rstrip().endswith(f"cosim {command}: error: unrecognized arguments: --stopp 3"), done.stderr
+
+
 @pytest.mark.parametrize(("command", "words"), [
     (["run", "."], "is a directory: give a scenario file (.toml) in it"),
     (["describe", "."], "is a directory: give a scenario file (.toml) in it"),

@@ -172,3 +172,16 @@ def test_a_level_runs_in_one_action_with_the_same_bits_as_one_subsim_at_a_time()
     for batched, sequential in zip(commits, seq_commits):
         for name in plan.order:
             assert batched[name]["y"].tobytes() == sequential[name]["y"].tobytes()
+
+
+def test_not_converged_says_what_to_try_from_how_the_residuals_went() -> None:
+    """Residuals that still fall want more stages; residuals that stopped falling want a shorter interval."""
+    from cosim.coupler.relaxation import NotConverged
+
+    falling = str(NotConverged(0.0, 0.4, 5, ["a.x"], {"a.x": [1e-3, 1e-4, 1e-5]}))
+    stuck = str(NotConverged(0.0, 0.4, 50, ["a.x", "b.y"], {"a.x": [1e-3, 2e-3, 1.5e-3, 1.6e-3],
+                                                          "b.y": [1e-3, 1e-4]}))
+    assert "to try: more [coupling] max_stages" in falling.splitlines()[-1]
+    assert "more [coupling] max_stages" in stuck.splitlines()[-1]  # b.y still falls
+    stuck = str(NotConverged(0.0, 0.4, 50, ["a.x"], {"a.x": [1e-3, 2e-3, 1.5e-3, 1.6e-3]}))
+    assert stuck.splitlines()[-1].startswith("  to try: a shorter [coupling] interval")

@@ -159,6 +159,12 @@ class NotConverged(RuntimeError):
         for name in failing:
             hist = ", ".join(f"{r:.3e}" for r in residuals[name][-8:])
             lines.append(f"  {name}: residual by stage (last 8) [{hist}]")
+        shorter = "a shorter [coupling] interval (max_halvings > 0 halves it only where needed)"
+        series = [residuals[n] for n in failing]
+        if any(len(r) < 2 or r[-1] < r[-2] for r in series):  # still falling, or too few stages to tell
+            lines.append(f"  to try: more [coupling] max_stages (the residuals still fall), or {shorter}")
+        else:
+            lines.append(f"  to try: {shorter}, or tolerances no tighter than the models' round-off")
         super().__init__("\n".join(lines))
         self.t0, self.t1, self.stages, self.failing, self.residuals = t0, t1, stages, failing, residuals
 
