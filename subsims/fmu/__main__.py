@@ -20,12 +20,17 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(USAGE, file=sys.stderr)
         return 2
     path, rest = argv[0], argv[1:]
-    from subsims.fmu.fmu import FmuError, read_fmu
+    from subsims.fmu.fmu import FmuError, check_binaries, read_fmu
     from subsims.fmu.subsim import FmuSubsim
 
+    if "--describe" in rest and rest != ["--describe"]:
+        print(f"subsims.fmu: --describe takes no other options, got {' '.join(rest)}\n{USAGE}", file=sys.stderr)
+        return 2
     try:
         if rest == ["--describe"]:
-            print(json.dumps(read_fmu(path).summary(), indent=2))
+            info = read_fmu(path)
+            check_binaries(info)
+            print(json.dumps(info.summary(), indent=2))
             return 0
         prototype = FmuSubsim(path)
     except FmuError as exc:

@@ -218,6 +218,19 @@ def extracted(info: FmuInfo) -> str:
     return _EXTRACTED[key]
 
 
+def check_binaries(info: FmuInfo) -> None:
+    """Load (and unload) the binary of each interface, as running it would: FmuError if one cannot load."""
+    unzip = extracted(info)
+    for kind, identifier in info.identifiers.items():
+        cls = fmpy.fmi2.FMU2Slave if info.major == 2 else fmpy.fmi3.FMU3Slave  # loading is the same for ME
+        try:
+            fmu = cls(guid=info.token, unzipDirectory=unzip, modelIdentifier=identifier, instanceName="check")
+        except Exception as exc:
+            why = _one_line(exc)
+            raise FmuError(f"{info.path}: cannot load the binary of its {kind!r} interface ({why})") from None
+        fmu.freeLibrary()
+
+
 # --- values -------------------------------------------------------------------------------------------
 
 def coerce(var: Variable, value: Any) -> Any:

@@ -217,6 +217,11 @@ class FmuSubsim(Subsim):
         if both:
             raise ValueError(f"{both} given both in params and in params.values")
         given.update(table)
+        ports = sorted(k for k in given if k in {v.name for v in info.inputs})
+        if ports:
+            what = "is a real input" if len(ports) == 1 else "are real inputs"
+            raise ValueError(f"{ports} in {info.path.name} {what}: a port, fed by a coupling or held constant in "
+                             f"the scenario's [subsims.<name>.inputs] ({ports[0]} = [value]), not a parameter")
         unknown = sorted(k for k in given if k not in info.settable)
         if unknown:
             known = ", ".join(sorted(info.settable)) or "none"

@@ -27,7 +27,8 @@ def _needs_gcc() -> None:
 def fmus(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     """``mass2``, ``mass3`` (FMI 2.0 / 3.0, CS + ME, state serialization), ``mass2_nostate``,
     ``mass3_nostate`` (cannot save state), ``mass3_f32`` (v and F are Float32), and broken ones:
-    ``not_zip``, ``no_description``, ``no_binary``, ``other_platform``, ``bad_description``."""
+    ``not_zip``, ``no_description``, ``no_binary``, ``other_platform``, ``bad_binary`` (it cannot load),
+    ``bad_description``."""
     _needs_gcc()
     out = tmp_path_factory.mktemp("fmus")
     built = {f"mass{v}": build_mass.build_mass_fmu(out, v) for v in (2, 3)}
@@ -40,6 +41,10 @@ def fmus(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     built["no_description"] = build_mass.write_fmu(out / "no_description.fmu", None, {build_mass.PLATFORM[2]: so})
     built["no_binary"] = build_mass.write_fmu(out / "no_binary.fmu", xml, {})
     built["other_platform"] = build_mass.write_fmu(out / "other_platform.fmu", xml, {"win64": so})
+    junk = out / "junk" / "mass.so"
+    junk.parent.mkdir()
+    junk.write_bytes(b"\x7fELF" + b"\x00" * 60)  # an ELF header and nothing a loader can use
+    built["bad_binary"] = build_mass.write_fmu(out / "bad_binary.fmu", xml, {build_mass.PLATFORM[2]: junk})
     built["bad_description"] = build_mass.write_fmu(out / "bad_description.fmu", "<fmiModelDescription",
                                                     {build_mass.PLATFORM[2]: so})
     for path in built.values():

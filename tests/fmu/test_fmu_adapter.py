@@ -67,7 +67,8 @@ def test_ports_and_metadata_come_from_the_model_description(fmus: dict[str, Path
     [
         ({"mass": 1.0}, "unknown FMU variable(s) ['mass'] in mass2.fmu; settable: k, m, u0, v0"),
         ({"u": 1.0}, "unknown FMU variable(s) ['u']"),  # an output with initial="calculated"
-        ({"F": 1.0}, "unknown FMU variable(s) ['F']"),  # a real input is a port, set by the coupling
+        ({"F": 1.0}, "['F'] in mass2.fmu is a real input: a port, fed by a coupling or held constant in the "
+                     "scenario's [subsims.<name>.inputs] (F = [value]), not a parameter"),
         ({"m": "heavy"}, "m is Real: needs a finite number, got 'heavy'"),
         ({"m": True}, "m is Real: needs a finite number, got True"),
         ({"interface": "scheduled"}, "interface 'scheduled' not available in mass2.fmu; it offers 'cs', 'me'"),
@@ -240,6 +241,18 @@ def test_a_broken_fmu_is_one_clear_line(fmus: dict[str, Path], tmp_path: Path, w
     if which == "missing":  # e.g. `cosim.serve subsims.fmu:FmuSubsim` on another machine, given the coordinator's path
         assert "no such FMU file on this machine" in cerr.value.message
         assert "python -m subsims.fmu /local/path/missing.fmu --connect" in cerr.value.message
+
+
+def test_describe_loads_the_binary_and_takes_no_other_options(fmus: dict[str, Path]) -> None:
+    """--describe said all was well for an FMU whose binary cannot load (the run failed later); and with
+    other options after it, it printed the serving usage, never naming --describe."""
+    bad = fmus["bad_binary"]
+    read_fmu(bad)  # the description and the file list are fine
+    done = python_m(str(bad), "--describe")
+    assert done.returncode == 2 and done.stdout == "" and done.stderr.count("\n") == 1, done.stderr
+    assert done.stderr.startswith(f"subsims.fmu: {bad}: cannot load the binary of its 'cs' interface ("), done.stderr
+    done = python_m(str(fmus["mass2"]), "--describe", "--name", "x")
+    assert done.returncode == 2 and "--describe takes no other options, got --describe --name x" in done.stderr
 
 
 def test_bad_fmu_does_not_crash_a_served_subsim(fmus: dict[str, Path], cosim_bus) -> None:
