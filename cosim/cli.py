@@ -9,6 +9,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from cosim import __version__, interrupt
+from cosim.console import say
 from cosim.contract import SubsimError
 from cosim.coupler.couplings import TransformError
 from cosim.coupler.relaxation import METHODS, Interval, NotConverged
@@ -259,25 +260,25 @@ def main(argv: Sequence[str] | None = None) -> int:
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit
         return 141  # 128 + SIGPIPE, as a program killed by the signal
     except OutputWriteError as exc:  # the run stopped; its files end at the last whole interval
-        print(f"cosim: run stopped: {exc}", file=sys.stderr)
+        say(f"cosim: run stopped: {exc}")
         return 1
     except (ScenarioError, OutputError, UsageError) as exc:
-        print(f"cosim: {exc}", file=sys.stderr)
+        say(f"cosim: {exc}")
         return 2
     except BusError as exc:
         line = zenoh_error_line(exc, getattr(args, "listen", None) or "")
-        print(f"cosim: {line}", file=sys.stderr)
+        say(f"cosim: {line}")
         return 2 if line.startswith("--listen") else 1
     except (NotConverged, TransformError) as exc:
-        print(f"cosim: run stopped: {exc}", file=sys.stderr)
+        say(f"cosim: run stopped: {exc}")
         return 1
     except SubsimError as exc:
-        print(f"cosim: run stopped: {exc}", file=sys.stderr)
+        say(f"cosim: run stopped: {exc}")
         if exc.traceback:  # a bug in a model: its own frames, file and line, as the subsim saw them
-            print(f"the model's traceback (in subsim {exc.subsim!r}):\n{exc.traceback.rstrip()}", file=sys.stderr)
+            say(f"the model's traceback (in subsim {exc.subsim!r}):\n{exc.traceback.rstrip()}")
         return 1
     except KeyboardInterrupt:
-        print("cosim: interrupted; results up to the last committed interval are kept", file=sys.stderr)
+        say("cosim: interrupted; results up to the last committed interval are kept")
         return 130
 
 

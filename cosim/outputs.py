@@ -152,10 +152,10 @@ def reserve_output(path: Path, overwrite: bool = False) -> OutputLock:
                           "choose another --output") from None
     lock = OutputLock.acquire(path)
     try:
-        if not overwrite:
-            for f in (path, stream_path(path)) if is_npz(path) else (path,):
+        if not overwrite:  # the result, and its companions too (diagnostics, units, an NPZ's stream)
+            for f in run_files(path):
                 if f.exists():
-                    hint = f"recover it with `cosim recover {path}`, " if f != path else ""
+                    hint = f"recover it with `cosim recover {path}`, " if f == stream_path(path) else ""
                     raise OutputError(f"{f} exists: {hint}pass --overwrite to replace it, or choose another --output")
         for f in run_files(path):
             probe_writable(f)

@@ -15,7 +15,6 @@ from __future__ import annotations
 import argparse
 import os
 import signal
-import sys
 import threading
 import time
 from collections.abc import Sequence
@@ -23,6 +22,7 @@ from pathlib import Path
 
 import zenoh
 
+from cosim.console import say
 from cosim.protocol.keys import check_name
 from cosim.protocol.security import SECRET_ENV, ZENOH_AUTH_ENV, ClientSecurity
 from cosim.protocol.transport.server import CommandServer
@@ -137,15 +137,12 @@ def main(model_cls: type[Subsim] | Subsim, argv: Sequence[str] | None = None, pr
             session = zenoh.open(client_config(args.connect, args.connect_timeout, int(args.lease * 1000),
                                               security=args.security))
         except zenoh.ZError as exc:
-            print(
-                f"{args.name}: cannot reach the coordinator at {args.connect} within {args.connect_timeout:g} s "
-                f"(or its login/TLS refused ours: check ${ZENOH_AUTH_ENV}/--auth-file and --tls-ca) ({exc})",
-                file=sys.stderr,
-            )
+            say(f"{args.name}: cannot reach the coordinator at {args.connect} within {args.connect_timeout:g} s "
+                 f"(or its login/TLS refused ours: check ${ZENOH_AUTH_ENV}/--auth-file and --tls-ca) ({exc})")
             return 2
     except _Stop as why:  # also one that arrived while zenoh.open held it, raised in the handler above
         if not args.quiet_stop:
-            print(f"{args.name}: stopping {why}", file=sys.stderr)
+            say(f"{args.name}: stopping {why}")
         return 0
     server: CommandServer | None = None
     try:
@@ -155,13 +152,13 @@ def main(model_cls: type[Subsim] | Subsim, argv: Sequence[str] | None = None, pr
                 key=args.security.key, max_request=args.max_request, queue_size=args.queue,
             )
             threading.Thread(target=_watch_router, args=(session,), daemon=True, name="router-watch").start()
-            print(f"{args.name}: serving run {args.run} via {args.connect} (pid {os.getpid()})", file=sys.stderr)
+            say(f"{args.name}: serving run {args.run} via {args.connect} (pid {os.getpid()})")
             server.serve()
             if not args.quiet_stop:
-                print(f"{args.name}: shutdown requested by the coordinator", file=sys.stderr)
+                say(f"{args.name}: shutdown requested by the coordinator")
         except _Stop as why:
             if not args.quiet_stop:
-                print(f"{args.name}: stopping {why}", file=sys.stderr)
+                say(f"{args.name}: stopping {why}")
         finally:
             # leaving anyway: a SIGTERM now (e.g. the coordinator's token deleted right after our shutdown
             # reply) must not interrupt the clean-up and turn exit code 0 into a traceback

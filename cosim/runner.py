@@ -6,13 +6,13 @@ The I/O shell around the coupler: scenario in, processes up, :class:`~cosim.driv
 from __future__ import annotations
 
 import json
-import sys
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from types import MappingProxyType
 
 from cosim import interrupt
+from cosim.console import say
 from cosim.contract import SubsimError
 from cosim.coupler.couplings import CouplingError, SignalRef
 from cosim.coupler.plan import Plan
@@ -30,7 +30,7 @@ Log = Callable[[str], None]
 
 
 def _stderr(msg: str) -> None:
-    print(msg, file=sys.stderr, flush=True)
+    say(msg)
 
 
 @dataclass

@@ -19,6 +19,7 @@ all belong to :class:`cosim.runtime.Runtime`.
 from __future__ import annotations
 
 import difflib
+import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any, ClassVar
@@ -93,7 +94,19 @@ def resolve_params(declared: Mapping[str, Param], given: Mapping[str, Any]) -> d
             kind = "true or false" if isinstance(default, bool) else "a number"
             raise ValueError(f"parameter {k!r} must be {kind} (its default is {default!r}), got the string {v!r}; "
                              "write it without quotes")
+        if _finite_numbers(default) and not _finite_numbers(v, allow_other=True):  # NaN slips past `x <= 0`
+            raise ValueError(f"parameter {k!r} must be finite (its default is {default!r}), got {v!r}")
     return {**{k: p.default for k, p in declared.items()}, **given}
+
+
+def _finite_numbers(v: Any, allow_other: bool = False) -> bool:
+    """Whether ``v`` is a finite number or a (nested) list of them; ``allow_other``: also true for what holds no
+    float at all (a string, a table: the model judges those)."""
+    if isinstance(v, float):
+        return math.isfinite(v)
+    if isinstance(v, (list, tuple)):
+        return all(_finite_numbers(x, allow_other) for x in v) and (allow_other or len(v) > 0)
+    return isinstance(v, int) or allow_other
 
 
 class ModelError(RuntimeError):

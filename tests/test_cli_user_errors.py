@@ -78,7 +78,8 @@ def test_a_transform_failing_in_a_run_stops_it_in_one_line_keeping_what_was_comm
         assert len(rows) > 5 and all(abs(float(r.split(",")[3])) <= 0.6 for r in rows)  # mass2.u
     # failing in the first interval: no file is left (headers only), so a second try needs no --overwrite
     sc.write_text(sc.read_text().replace("limit = 0.6", "limit = -1.0"))
-    out.unlink()
+    for f in tmp_path.glob("x.*"):
+        f.unlink()
     for _ in range(2):
         done = subprocess.run([*COSIM, "run", str(sc), "--quiet", "--output", str(out)], capture_output=True,
                               text=True, timeout=120, cwd=tmp_path)
@@ -204,3 +205,22 @@ def test_a_binary_auth_file_is_named(tmp_path: Path) -> None:
 def test_serve_help_is_not_an_error() -> None:
     done = subprocess.run([sys.executable, "-m", "cosim.serve", "--help"], capture_output=True, text=True, timeout=60)
     assert done.returncode == 0 and done.stdout.startswith("usage: python -m cosim.serve package.module:Class")
+
+
+def test_a_run_whose_stderr_reader_went_away_still_runs_to_the_end(tmp_path: Path) -> None:
+    """`cosim run ... 2>&1 | head -1`, a dead tee: every line on stderr then fails with EPIPE. The subsims died
+    of it at their first line (and replacements at theirs), and the run stopped without a word. The
+    pipe is closed before anything is written, so every line of the run meets EPIPE."""
+    out = tmp_path / "x.csv"
+    proc = subprocess.Popen([*COSIM, "run", str(OSCILLATOR), "--stop", "1", "--output", str(out)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path)
+    proc.stderr.close()
+    try:
+        stdout, _ = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 0, stdout
+    assert "20 intervals to t = 1 " in stdout
+    assert out.read_text().splitlines()[-1].startswith("1.0,")

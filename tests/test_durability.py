@@ -293,6 +293,14 @@ def test_existing_result_is_refused_before_launch_unless_overwrite(tmp_path: Pat
     done = cosim("run", str(OSCILLATOR), "--stop", "0.1", "--output", str(out), "--overwrite", "--quiet")
     assert done.returncode == 0, done.stderr
     assert_whole_intervals(out)
+    for companion in (".csv.diag.csv", ".csv.meta.json"):  # a companion alone is not replaced silently either
+        lone = tmp_path / f"lone{companion}"
+        lone.write_text("precious\n")
+        done = cosim("run", str(OSCILLATOR), "--stop", "0.1", "--output", str(tmp_path / "lone.csv"))
+        assert done.returncode == 2 and lone.read_text() == "precious\n"
+        assert done.stderr.splitlines() == [f"cosim: {lone} exists: pass --overwrite to replace it, or choose "
+                                            "another --output"]
+        lone.unlink()
 
 
 def test_a_second_run_on_the_same_file_is_refused_naming_the_first(tmp_path: Path, runs: list[Run]) -> None:

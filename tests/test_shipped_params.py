@@ -164,3 +164,18 @@ def test_the_pair_aero_takes_no_parameters() -> None:
     with pytest.raises(CosimError) as err:
         rt.configure({"rho": 1.0})
     assert err.value.code == "bad_value" and "takes no parameters" in err.value.message and "'rho'" in err.value.message
+
+
+SHIPPED = [f[0] for f in FAMILIES] + [LagrangePairAero]
+
+
+@pytest.mark.parametrize(("cls", "name"), [(cls, name) for cls in SHIPPED for name, p in cls().params.items()
+                                           if isinstance(p.default, float)])
+def test_a_nan_parameter_is_refused_at_configure(cls: type[Subsim], name: str) -> None:
+    """NaN passes a check written ``x <= 0`` (every comparison with NaN is false): the oscillator then ran and
+    stopped at its first output, not at configure naming the parameter."""
+    rt = Runtime(cls)
+    with pytest.raises(CosimError) as err:
+        rt.configure({name: float("nan")})
+    assert err.value.code == "bad_value" and name in err.value.message, err.value.message
+    assert rt.state is None

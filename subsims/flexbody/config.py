@@ -107,7 +107,7 @@ def build(params: Mapping[str, Any]) -> FlexSetup:
     omega2_all, omega2, Phi = modes_from_params(p, masses)
     t = omega2.size
     zeta = np.broadcast_to(np.asarray(p["modal_damping"], dtype=np.float64), (t,)).copy()
-    if np.any(zeta < 0):
+    if not np.all(zeta >= 0):  # (not all >= 0: NaN too)
         raise ValueError("parameter 'modal_damping' must be >= 0")
     model = make_modal_model(m_b, I_b, s, masses, r, omega2, Phi, zeta, int(p["mass_order"]), int(p["kin_order"]))
 

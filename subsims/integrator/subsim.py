@@ -41,6 +41,8 @@ class Integrator(Subsim):
         self.inputs = {"u": Port(size, "", "rate of y")}
         self.outputs = {"y": Port(size)}
         self.compute_delay = float(params["compute_delay"])
+        if not 0 <= self.compute_delay < float("inf"):
+            raise ValueError(f"compute_delay must be a finite number of seconds >= 0, got {self.compute_delay}")
         return _vector(params, "y0", size)
 
     def advance(self, state: np.ndarray, times: np.ndarray, u: InputFunction):

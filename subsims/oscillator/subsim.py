@@ -27,9 +27,13 @@ class Mass(Subsim):
 
     def initial_state(self, params: Mapping[str, Any]) -> np.ndarray:
         self.m, self.k, self.idiv = float(params["m"]), float(params["k"]), int(params["idiv"])
-        if self.m <= 0 or self.idiv < 1:
+        if not self.m > 0 or self.idiv < 1:  # (not m > 0: NaN too)
             raise ValueError(f"need m > 0 and idiv >= 1, got m={self.m}, idiv={self.idiv}")
-        return np.array([float(params["u0"]), float(params["v0"])])
+        state = np.array([float(params["u0"]), float(params["v0"])])
+        bad = [k for k, v in (("m", self.m), ("k", self.k), ("u0", state[0]), ("v0", state[1])) if not np.isfinite(v)]
+        if bad:
+            raise ValueError(f"{', '.join(bad)} must be finite numbers")
+        return state
 
     def advance(self, state: np.ndarray, times: np.ndarray, u: InputFunction):
         x = integrate(state, times, lambda ts: u(ts)["F"], self.m, self.k, self.idiv)
