@@ -88,7 +88,8 @@ def _run_until_done(args: argparse.Namespace, state: dict) -> int:
         print(f"requests: {s.requests / s.intervals:.2f} an interval, sent in {s.round_trips / s.intervals:.2f} "
               f"round trips{per_second}")
     for r in report.extra.get("restarts", []):
-        print(f"restart: {r.subsim} {r.reason}; restored to t = {r.at:g}")
+        print(f"restart: {r.subsim} {r.reason}; " + (f"restored to t = {r.at:g}" if r.restored else
+                                                      "the replacement failed while being restored"))
     if report.method == "distributed":
         print(f"order: {' -> '.join(report.order)}; feedback: {'; '.join(report.feedback) or 'none'}")
     print(f"results: {report.output}\ndiagnostics: {report.diagnostics}")

@@ -11,6 +11,7 @@ bit-identical to an undisturbed run.
 
 from __future__ import annotations
 
+import math
 import os
 import time
 from collections import deque
@@ -113,10 +114,16 @@ class Restart:
     at: float  # the committed time it was restored to
     reason: str
     replayed: int  # committed intervals replayed since the checkpoint
+    restored: bool = True  # False: this replacement failed while being restored (and used up a restart)
 
 
 def _recoverable(exc: BaseException) -> bool:
     return isinstance(exc, (SubsimDied, SubsimHung))
+
+
+def _lost_while_restoring(exc: BaseException) -> bool:
+    """A replacement that died, hung, or did not come up (its start is a ``spawn``/``connect`` error)."""
+    return _recoverable(exc) or (isinstance(exc, SubsimError) and exc.command in {"spawn", "connect"})
 
 
 def plan_for(
@@ -408,32 +415,56 @@ class Coordinator:
                 self._replace(name, exc)
 
     def _replace(self, name: str, why: Exception) -> None:
-        """A new process for ``name`` at its last checkpoint, with every committed interval since replayed."""
+        """A new process for ``name`` at its last checkpoint, with every committed interval since replayed. A
+        replacement that dies, hangs or cannot start while it is being restored uses up a restart too, and
+        the next one is tried while restarts are left."""
         assert self.recovery is not None
         reason = f"{'died' if isinstance(why, SubsimDied) else 'hung'} ({why})"
         self.handles[name].close()
-        handle = self.recovery.revive(name)
-        checkpoint = self._checkpoints.get(name)
-        if checkpoint is None:  # dead before the first checkpoint, taken before the first interval: revive() made
-            self.handles[name] = handle  # it as it started, which is its committed state
-            at = float(handle.status()["time"])
-            self.restarts.append(Restart(name, at, reason, 0))
-            self.recovery.log(f"cosim: {name} {reason}; replaced ({len(self.restarts)} of {self.recovery.restarts}) "
-                              f"at its start, t = {at:g}")
-            return
-        handle.set_state(checkpoint)
-        replay = [(t, inputs[name]) for t, inputs in self._journal if t[0] >= checkpoint.time]
-        for i, (t, inputs) in enumerate(replay):
-            handle.run_interval(t, inputs, self.settings.interp, commit=i > 0)
-        if replay:
-            handle.commit()
+        while True:
+            try:
+                handle, at, replayed = self._restored(name)
+                break
+            except Exception as exc:
+                if not _lost_while_restoring(exc):
+                    raise
+                checkpoint = self._checkpoints.get(name)
+                self.restarts.append(Restart(name, checkpoint.time if checkpoint else math.nan, reason, 0,
+                                             restored=False))
+                used, allowed = len(self.restarts), self.recovery.restarts
+                self.recovery.log(f"cosim: {name} {reason}; its replacement ({used} of {allowed}) failed while "
+                                  f"being restored: {exc}")
+                if used >= allowed:
+                    raise SubsimError(exc.code, f"{exc.message} (its replacement {used} of {allowed}, while being "
+                                      "restored)", name, exc.command) from None
+                reason = f"replacement failed ({exc})"
         self.handles[name] = handle
         self._uncommitted.discard(name)
-        at = float(replay[-1][0][-1]) if replay else checkpoint.time
-        self.restarts.append(Restart(name, at, reason, len(replay)))
+        self.restarts.append(Restart(name, at, reason, replayed))
+        checkpoint = self._checkpoints.get(name)
+        where = (f"restored to t = {at:g} (checkpoint at t = {checkpoint.time:g}, {replayed} intervals replayed)"
+                 if checkpoint is not None else f"at its start, t = {at:g}")
         self.recovery.log(f"cosim: {name} {reason}; replaced ({len(self.restarts)} of {self.recovery.restarts}), "
-                          f"restored to t = {at:g} (checkpoint at t = {checkpoint.time:g}, "
-                          f"{len(replay)} intervals replayed)")
+                          f"{where}")
+
+    def _restored(self, name: str) -> tuple[SubsimHandle, float, int]:
+        """A new process for ``name`` in its committed state: its handle, that time, and the intervals replayed."""
+        assert self.recovery is not None
+        handle = self.recovery.revive(name)
+        try:
+            checkpoint = self._checkpoints.get(name)
+            if checkpoint is None:  # dead before the first checkpoint, taken before the first interval: revive()
+                return handle, float(handle.status()["time"]), 0  # made it as it started, its committed state
+            handle.set_state(checkpoint)
+            replay = [(t, inputs[name]) for t, inputs in self._journal if t[0] >= checkpoint.time]
+            for i, (t, inputs) in enumerate(replay):
+                handle.run_interval(t, inputs, self.settings.interp, commit=i > 0)
+            if replay:
+                handle.commit()
+            return handle, float(replay[-1][0][-1]) if replay else checkpoint.time, len(replay)
+        except BaseException:
+            handle.close()
+            raise
 
 
 class _Replaced(Exception):

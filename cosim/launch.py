@@ -148,6 +148,7 @@ class Bus:
     attached: list[str] = field(default_factory=list)  # names of external subsims: sent shutdown on close
     private_dir: str | None = None  # the 0700 directory of a PRIVATE endpoint's socket, removed on close
     names: tuple[str, ...] | None = None  # the subsims this run may have, each with its own login (None: shared)
+    _spawned_as: dict[str, tuple[str, str | None, float | None]] = field(default_factory=dict, repr=False)
 
     @classmethod
     def open(cls, listen: str = "tcp/127.0.0.1:0", run: str | None = None, security: Security | None = None,
@@ -233,6 +234,7 @@ class Bus:
         """Start ``python -m module`` (or ``cosim.serve model``) as subsim ``name``; wait until it answers."""
         env = {**os.environ, **self.subsim_env(name)}
         env.setdefault("PYTHONUNBUFFERED", "1")
+        self._spawned_as[name] = (module, model, lease)  # for respawn, even if this start fails
         if SEARCH_PATH:  # the scenario's directory and the working directory (cosim.importing)
             env["PYTHONPATH"] = os.pathsep.join([*filter(None, [env.get("PYTHONPATH")]), *SEARCH_PATH])
         try:
@@ -259,15 +261,16 @@ class Bus:
 
     def respawn(self, name: str, **spawn_args: object) -> SubsimProcess:
         """Kill the process serving ``name`` (it died or hung: no grace) and start a new one the same way."""
-        old = next((p for p in self.processes if p.name == name), None)
-        if old is None:
+        if name not in self._spawned_as:
             raise KeyError(f"no process of this bus serves {name!r}")
-        if old.popen.poll() is None:
-            old.popen.kill()
-        old.popen.wait()
-        old.handle.close()
-        self.processes.remove(old)
-        return self.spawn(old.module, name, model=old.model, lease=old.lease, **spawn_args)  # type: ignore[arg-type]
+        for old in [p for p in self.processes if p.name == name]:  # none if its last start failed to make one
+            if old.popen.poll() is None:
+                old.popen.kill()
+            old.popen.wait()
+            old.handle.close()
+            self.processes.remove(old)
+        module, model, lease = self._spawned_as[name]
+        return self.spawn(module, name, model=model, lease=lease, **spawn_args)  # type: ignore[arg-type]
 
     def close(self) -> None:
         """Send ``shutdown`` to attached subsims, stop every spawned process, undeclare the coordinator's

@@ -247,6 +247,56 @@ def test_with_no_restarts_left_the_failure_stops_the_run() -> None:
         assert ring.coordinator.restarts == []
 
 
+class FailingRevivals(Ring):
+    """A Ring whose first ``fail`` replacements of a subsim fail while being restored: killed as soon as they
+    answer (``how = "killed"``; their set_state or replay meets a dead process), or never started
+    (``how = "no start"``: the error a replacement that exits during start-up gives)."""
+
+    def __init__(self, bus: Bus, method: str, how: str, fail: int, restarts: int) -> None:
+        self.how, self.fail = how, fail
+        super().__init__(bus, method, restarts=restarts)
+
+    def revive(self, name: str):
+        if self.fail == 0:
+            return super().revive(name)
+        self.fail -= 1
+        if self.how == "no start":
+            raise SubsimError("no_responder", "process exited with code -9", name, "spawn")
+        handle = super().revive(name)
+        kill(self.pid(name))
+        deadline = time.monotonic() + 10
+        while handle.alive and time.monotonic() < deadline:
+            time.sleep(0.005)
+        return handle
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("how", ["killed", "no start"])
+def test_a_replacement_that_fails_while_being_restored_uses_a_restart_and_the_next_one_is_tried(
+    undisturbed: dict, how: str
+) -> None:
+    """The replacement's own failure ended the run, whatever --restarts said."""
+    with Bus.open() as bus:
+        ring = FailingRevivals(bus, "distributed", how, fail=1, restarts=3)
+        ring.coordinator.on_stage = lambda stage, out: kill(ring.pid("b")) if len(ring.intervals) == 5 and \
+            not ring.coordinator.restarts else None
+        assert ring.run() == undisturbed["distributed"]
+        assert [(r.subsim, r.restored) for r in ring.coordinator.restarts] == [("b", False), ("b", True)], ring.log
+        assert "failed while being restored" in ring.log[0] and "replaced (2 of 3)" in ring.log[1], ring.log
+
+
+@pytest.mark.slow
+def test_when_the_last_restart_fails_while_being_restored_the_error_says_so() -> None:
+    with Bus.open() as bus:
+        ring = FailingRevivals(bus, "distributed", "killed", fail=2, restarts=2)
+        ring.coordinator.on_stage = lambda stage, out: kill(ring.pid("b")) if len(ring.intervals) == 5 and \
+            not ring.coordinator.restarts else None
+        with pytest.raises(SubsimError) as err:
+            ring.run()
+        assert err.value.subsim == "b" and "(its replacement 2 of 2, while being restored)" in err.value.message
+        assert [r.restored for r in ring.coordinator.restarts] == [False, False], ring.log
+
+
 def children(pid: int) -> list[int]:
     out = []
     for task in Path(f"/proc/{pid}/task").iterdir():
