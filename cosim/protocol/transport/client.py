@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import threading
 import time
+from collections import deque
 from collections.abc import Callable, Iterable
 from functools import partial
 from typing import Any
@@ -25,10 +26,12 @@ EVERY_QUERYABLE = zenoh.QueryTarget.ALL
 class _Pending:
     """One request in flight: its reply channel, the token that can cancel it, and its deadline."""
 
-    __slots__ = ("replies", "token", "expires", "hung", "gone", "timeout_at", "early", "ended")
+    __slots__ = ("replies", "token", "expires", "hung", "gone", "sent", "timeout_at", "early", "ended")
 
-    def __init__(self, replies: Any, token: zenoh.CancellationToken, expires: float | None, timeout_at: float) -> None:
+    def __init__(self, replies: Any, token: zenoh.CancellationToken, expires: float | None, sent: float,
+                 timeout_at: float) -> None:
         self.replies, self.token, self.expires = replies, token, expires
+        self.sent = sent
         self.timeout_at = timeout_at  # when zenoh's own timeout of the query ends it
         self.hung = False
         self.gone = False  # the subsim's liveliness token went while this was in flight
@@ -66,14 +69,27 @@ class _Watchdog:
     The caller blocks on zenoh's reply channel (no GIL hand-off on the reply path: a callback handler
     measured twice as slow under load); this thread wakes every ``TICK`` seconds, so a deadline fires
     at most that late. Registering a request is a dict insert: nothing is woken per request.
+
+    A tick more than ``PAUSE`` seconds late means this process did not run meanwhile (stopped with Ctrl-Z or
+    SIGSTOP, a debugger, a paused VM): the time it lost is not the subsims' fault, so every deadline moves on
+    by it, and the pauses are kept for the errors to name (:meth:`paused_since`).
     """
 
     TICK = 0.05
+    PAUSE = 0.5
 
     def __init__(self) -> None:
         self._watched: dict[int, _Pending] = {}
         self._thread: threading.Thread | None = None
         self._lock = threading.Lock()
+        self._tick = time.monotonic()  # the last tick
+        self._pauses: deque[tuple[float, float]] = deque(maxlen=16)  # (start, end) of the latest pauses
+
+    def paused_since(self, since: float) -> float:
+        """Seconds this process was found not running after ``since``, a pause not yet ticked over included."""
+        lost = sum(end - max(start, since) for start, end in list(self._pauses) if end > since)
+        late = time.monotonic() - self._tick - self.TICK
+        return lost + (late if self._thread is not None and late > self.PAUSE else 0.0)
 
     def watch(self, pending: _Pending) -> None:
         self._watched[id(pending)] = pending
@@ -87,9 +103,16 @@ class _Watchdog:
         self._watched.pop(id(pending), None)
 
     def _run(self) -> None:
+        self._tick = time.monotonic()
         while True:
             time.sleep(self.TICK)
             now = time.monotonic()
+            late, self._tick = now - self._tick - self.TICK, now
+            if late > self.PAUSE:
+                self._pauses.append((now - late, now))
+                for pending in list(self._watched.values()):
+                    if pending.expires is not None:
+                        pending.expires += late
             for key, pending in list(self._watched.items()):
                 if pending.expires is not None and now >= pending.expires:
                     self._watched.pop(key, None)
@@ -189,7 +212,7 @@ class RemoteHandle(SubsimHandle):
             limit = self.timeout if deadline is None else min(self.timeout, max(2 * deadline, FAST_QUERY_TIMEOUT))
             replies = self.session.get(self._key, payload=payload, timeout=limit, cancellation_token=token,
                                        target=EVERY_QUERYABLE, consolidation=zenoh.ConsolidationMode.NONE)
-        pending = _Pending(replies, token, None if deadline is None else now + deadline, now + limit)
+        pending = _Pending(replies, token, None if deadline is None else now + deadline, now, now + limit)
         self._in_flight.add(pending)
         if deadline is not None:
             _WATCHDOG.watch(pending)
@@ -231,18 +254,28 @@ class RemoteHandle(SubsimHandle):
                                       cmd if result.command == "?" else result.command, result.traceback)
                 return result
             if error is not None and not pending.hung and not forged:
-                raise self._zenoh_error(cmd, error)
+                raise self._zenoh_error(cmd, error, pending)
             raise self._no_reply(cmd, pending, deadline, forged)
         finally:
             self._in_flight.discard(pending)
             _WATCHDOG.forget(pending)
 
-    def _zenoh_error(self, cmd: str, reply: zenoh.Reply) -> SubsimError:
+    def _zenoh_error(self, cmd: str, reply: zenoh.Reply, pending: _Pending) -> SubsimError:
         """What an error reply from zenoh itself (not from the subsim) means."""
         text = reply.err.payload.to_bytes().decode(errors="replace")
         if self._died.is_set():
             return SubsimDied("no_responder", f"the process died during the request ({text})", self.name, cmd)
-        return SubsimError("timeout", f"no reply within {self.timeout:g} s ({text})", self.name, cmd)
+        return self._lost_in_pause(cmd, pending) or SubsimError(
+            "timeout", f"no reply within {self.timeout:g} s ({text})", self.name, cmd)
+
+    def _lost_in_pause(self, cmd: str, pending: _Pending) -> SubsimHung | None:
+        """The query timed out while this process was not running: the reply is lost, maybe not the subsim. It
+        is replaced as a hung one would be (restored, bit-identical), and the error says whose the pause was."""
+        paused = _WATCHDOG.paused_since(pending.sent)
+        if paused <= 0.0:
+            return None
+        return SubsimHung("timeout", f"its reply was lost: this coordinator did not run for {paused:.1f} s during "
+                          "the request (stopped, or starved of CPU) and the query timed out meanwhile", self.name, cmd)
 
     def _no_reply(self, cmd: str, pending: _Pending, deadline: float | None, forged: int) -> SubsimError:
         """Why the query ended without a genuine reply."""
@@ -257,7 +290,8 @@ class RemoteHandle(SubsimHandle):
         # query without its error reply (seen under load)
         self._died.wait(0.5 if self._alive.is_set() else 0.0)
         if not self._died.is_set() and self._alive.is_set() and time.monotonic() >= pending.timeout_at:
-            return SubsimError("timeout", f"no reply within {self.timeout:g} s", self.name, cmd)
+            return self._lost_in_pause(cmd, pending) or SubsimError("timeout", f"no reply within {self.timeout:g} s",
+                                                                    self.name, cmd)
         reason = "the process died during the request" if self._died.is_set() else "no process serves this subsim"
         return SubsimDied("no_responder", reason, self.name, cmd)
 
