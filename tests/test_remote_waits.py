@@ -58,10 +58,10 @@ def test_a_query_that_zenoh_ends_empty_after_its_timeout_is_a_timeout(cosim_bus:
     handle = RemoteHandle(cosim_bus.session, cosim_bus.run, "quiet", timeout=0.5)
     try:
         handle._alive.set()  # as if its liveliness token had been seen
-        ended = _Pending(iter(()), zenoh.CancellationToken(), None, time.monotonic() - 0.01)
+        ended = _Pending(iter(()), zenoh.CancellationToken(), None, time.monotonic() - 0.51, time.monotonic() - 0.01)
         err = handle._no_reply("status", ended, None, 0)
         assert type(err) is SubsimError and err.code == "timeout" and "0.5 s" in err.message
-        early = _Pending(iter(()), zenoh.CancellationToken(), None, time.monotonic() + 60.0)
+        early = _Pending(iter(()), zenoh.CancellationToken(), None, time.monotonic(), time.monotonic() + 60.0)
         err = handle._no_reply("status", early, None, 0)
         assert isinstance(err, SubsimDied) and err.code == "no_responder"
     finally:
@@ -89,7 +89,7 @@ def test_looking_for_the_reply_never_blocks_and_the_reply_it_finds_is_the_result
         np.testing.assert_array_equal(wait().outputs["y"], want.outputs["y"])
     # a query that ends without a reply is "replied" too (waiting would not block), and fails when collected
     pending = _Pending(cosim_bus.session.get("cosim/nobody/serves/this", timeout=0.2), zenoh.CancellationToken(),
-                       None, 0.0)
+                       None, 0.0, 0.0)
     deadline = time.monotonic() + 2.0
     while not pending.ready():
         assert time.monotonic() < deadline
