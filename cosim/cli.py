@@ -13,7 +13,7 @@ from cosim.console import say
 from cosim.contract import SubsimError
 from cosim.coupler.couplings import TransformError
 from cosim.coupler.relaxation import METHODS, Interval, NotConverged
-from cosim.outputs import OutputError, OutputWriteError
+from cosim.outputs import OutputError, OutputWriteError, resume_path
 from cosim.preflight import UsageError, check_listen, check_run_options, check_stop, zenoh_error_line
 from cosim.protocol.keys import check_name
 from cosim.protocol.security import Security
@@ -38,6 +38,8 @@ def _run(args: argparse.Namespace) -> int:
             where = "before any interval was committed"
         else:
             where = f"at t = {state['t']:.6g} s; every committed interval is in {state['output']}"
+            if resume_path(Path(state["output"])).exists():
+                where += " (go on with the same command and --resume)"
         print(f"cosim: stopped by {exc.name} {where}", file=sys.stderr, flush=True)
         return exc.exit_status
 
@@ -61,9 +63,13 @@ def _run_until_done(args: argparse.Namespace, state: dict) -> int:
     def committed(interval: Interval) -> None:
         state["t"] = float(interval.t[-1])
 
+    if args.resume and args.overwrite:
+        raise UsageError("--resume goes on with the results; --overwrite starts them again: give one of them")
     if method == "unified":
         from cosim.unified import run_unified
 
+        if args.resume:
+            raise UsageError("--resume continues coupled runs (centralized, distributed), not unified ones")
         report = run_unified(scenario, stop=args.stop, output=output, overwrite=args.overwrite, on_interval=committed)
     else:
         security = _security(args, scenario.security)
@@ -77,7 +83,8 @@ def _run_until_done(args: argparse.Namespace, state: dict) -> int:
         report = run_scenario(scenario, method=method, stop=args.stop, output=output, inprocess=args.inprocess,
                               listen=args.listen, progress=not args.quiet, on_interval=committed,
                               overwrite=args.overwrite, restarts=args.restarts, timeout=args.timeout,
-                              security=security, run_id=args.run_id, attach_wait=args.attach_wait)
+                              security=security, run_id=args.run_id, attach_wait=args.attach_wait,
+                              resume=args.resume)
     s = report.summary
     hist = ", ".join(f"{k} stages: {v}" for k, v in sorted(s.stages.items()))
     print(f"{scenario.name} ({report.method}): {s.intervals} intervals to t = {s.t_end:.6g} in {s.wall_time:.2f} s"
@@ -197,6 +204,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--output", type=Path,
                    help="result file, .csv or .npz (default: results/<name>-<method>.csv)")
     r.add_argument("--overwrite", action="store_true", help="replace an existing result file (default: refuse)")
+    r.add_argument("--resume", action="store_true",
+                   help="go on with the interrupted run that wrote --output (the same scenario and method; --stop "
+                        "may be later), from its latest resume point (one every [run] checkpoint_every intervals)")
     r.add_argument("--method", choices=[*METHODS, "unified"], help="coupling method (default: the scenario's)")
     r.add_argument("--inprocess", action="store_true", help="run every subsim in this process (no Zenoh)")
     r.add_argument("--listen",

@@ -30,6 +30,7 @@ from cosim.coupler.relaxation import (
     Interval,
     Outputs,
     Relaxation,
+    ResumePoint,
     RetryInterval,
     Rollback,
     Run,
@@ -48,6 +49,7 @@ OnStage = Callable[[int, Outputs], None]
 # at a time, in the coordinator's idle moments (``cosim.runner`` writes a result file so).
 OnInterval = Callable[[Interval], Iterable[object] | None]
 Revive = Callable[[str], SubsimHandle]  # a new process for the named subsim, configured at the run's start
+OnCheckpoint = Callable[[ResumePoint, dict[str, SubsimState]], None]  # every subsim's committed state there
 
 
 CORES = os.cpu_count() or 1  # a run of fewer subsims leaves a core to the coordinator's own writing
@@ -152,8 +154,13 @@ class Coordinator:
         on_stage: OnStage | None = None,
         recovery: Recovery | None = None,
         deadline: Deadline | None = None,
+        on_checkpoint: OnCheckpoint | None = None,
+        checkpoint_every: int = 200,
     ) -> None:
         self.handles = dict(handles)
+        # a checkpoint every so many intervals: for replacements (recovery's setting), and handed to on_checkpoint
+        self.on_checkpoint = on_checkpoint
+        self._checkpoint_every = recovery.checkpoint_every if recovery is not None else checkpoint_every
         self.settings = settings
         self.on_stage = on_stage
         self.recovery = recovery
@@ -206,12 +213,13 @@ class Coordinator:
     # --- a run --------------------------------------------------------------------------------
 
     def run(
-        self, t_start: float, t_stop: float, on_interval: OnInterval | None = None
+        self, t_start: float, t_stop: float, on_interval: OnInterval | None = None, resume: ResumePoint | None = None
     ) -> RunSummary:
-        """Advance whole intervals from ``t_start`` (every subsim's committed time) past ``t_stop``."""
+        """Advance whole intervals from ``t_start`` (every subsim's committed time) past ``t_stop``. ``resume``:
+        go on with such a run from a checkpoint's resume point instead (every subsim restored to its state there)."""
         if self.recovery is not None and not self._checkpoints:
             self._checkpoint()
-        summary = self._drive(self._relaxation().run(t_start, t_stop), on_interval)
+        summary = self._drive(self._relaxation().run(t_start, t_stop, resume), on_interval)
         self.commit_pending()
         assert summary is not None
         return summary
@@ -396,12 +404,16 @@ class Coordinator:
         self._journal = [entry for entry in self._journal if entry[0][0] >= oldest]
 
     def _journal_commit(self, interval: Interval) -> None:
-        if self.recovery is None:
+        if self.recovery is None and self.on_checkpoint is None:
             return
-        self._journal.append((interval.t, dict(self._sent)))
+        if self.recovery is not None:
+            self._journal.append((interval.t, dict(self._sent)))
         self._commits += 1
-        if self._commits % self.recovery.checkpoint_every == 0:
+        if self._commits % self._checkpoint_every == 0:
             self._checkpoint()
+            if self.on_checkpoint is not None:
+                assert self._machine is not None and self._machine.resume_point is not None
+                self.on_checkpoint(self._machine.resume_point, dict(self._checkpoints))
 
     def _call_replacing(self, name: str, call: Callable[[SubsimHandle], T]) -> T:
         """``call(handle)`` outside a run (a checkpoint, a rollback); a subsim that died or hung meanwhile is

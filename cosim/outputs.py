@@ -49,6 +49,11 @@ def stream_path(path: Path) -> Path:
     return path.with_name(path.name + ".partial")
 
 
+def resume_path(path: Path) -> Path:
+    """Where an interrupted run's latest resume point is kept (``cosim.resume``)."""
+    return path.with_name(path.name + ".resume.npz")
+
+
 def lock_path(path: Path) -> Path:
     return path.with_name(path.name + ".lock")
 
@@ -60,8 +65,8 @@ def is_npz(path: Path) -> bool:
 def run_files(path: Path) -> list[Path]:
     """Every file a run into ``path`` writes (besides its lock)."""
     if is_npz(path):
-        return [path, stream_path(path), diag_path(path)]
-    return [path, meta_path(path), diag_path(path)]
+        return [path, stream_path(path), diag_path(path), resume_path(path)]
+    return [path, meta_path(path), diag_path(path), resume_path(path)]
 
 
 def describe_oserror(exc: OSError) -> str:
@@ -156,6 +161,8 @@ def reserve_output(path: Path, overwrite: bool = False) -> OutputLock:
             for f in run_files(path):
                 if f.exists():
                     hint = f"recover it with `cosim recover {path}`, " if f == stream_path(path) else ""
+                    if resume_path(path).exists():
+                        hint = "continue that run with --resume, "
                     raise OutputError(f"{f} exists: {hint}pass --overwrite to replace it, or choose another --output")
         for f in run_files(path):
             probe_writable(f)
@@ -186,13 +193,18 @@ class AppendFile:
     """A file written by whole records: each :meth:`append` is one ``write`` of complete rows, and a
     failed one (disk full, I/O error) is cut back, so the file always ends at the last whole record."""
 
-    def __init__(self, path: Path, what: str) -> None:
+    def __init__(self, path: Path, what: str, keep: int | None = None) -> None:
+        """``keep``: go on with the file's first ``keep`` bytes (a resumed run) instead of an empty file."""
         self.path, self.what = path, what
         try:
-            self.fd: int | None = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_CLOEXEC, 0o644)
+            self.fd: int | None = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_CLOEXEC | (0 if keep else os.O_TRUNC),
+                                          0o644)
+            if keep:
+                os.ftruncate(self.fd, keep)
+                os.lseek(self.fd, keep, os.SEEK_SET)
         except OSError as exc:
             raise OutputError(f"cannot create {path} ({describe_oserror(exc)}): choose another --output") from None
-        self.size = 0
+        self.size = keep or 0
 
     def append(self, data: bytes, ends_at: Callable[[], str] = lambda: "") -> None:
         """Write ``data`` completely or not at all (as far as the file's length shows)."""

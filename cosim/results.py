@@ -82,7 +82,10 @@ class ResultWriter:
     """
 
     def __init__(self, path: Path, signals: Sequence[tuple[SignalRef, int]],
-                 units: Mapping[str, str] | None = None, lock: OutputLock | None = None) -> None:
+                 units: Mapping[str, str] | None = None, lock: OutputLock | None = None,
+                 resume_at: float | None = None) -> None:
+        """``resume_at``: go on with the files of an interrupted run, cut back to their rows up to that time (a
+        resume point's), which they must reach."""
         self.path, self.signals = Path(path), list(signals)
         self.columns = column_names(self.signals)
         self.units = column_units(self.signals, units)
@@ -94,6 +97,9 @@ class ResultWriter:
         self._count = 0
         self._data: AppendFile | None = None
         self._diag: AppendFile | None = None
+        if resume_at is not None:
+            self._resume(resume_at)
+            return
         try:
             if self._npz:
                 self._data = AppendFile(stream_path(self.path), "the NPZ's streamed samples")
@@ -115,6 +121,38 @@ class ResultWriter:
                 meta_path(self.path).unlink(missing_ok=True)
             self._lock.release()
             raise
+
+    def _resume(self, t: float) -> None:
+        data = stream_path(self.path) if self._npz else self.path
+        try:
+            if self._npz and not data.exists() and self.path.exists():  # the stopped run built its NPZ: stream again
+                columns, rows = read_results(self.path)
+                stream = AppendFile(data, "the NPZ's streamed samples")
+                try:
+                    stream.append(stream_header(columns, [read_units(self.path).get(c, "") for c in columns]))
+                    stream.append(np.ascontiguousarray(rows, dtype="<f8").tobytes())
+                finally:
+                    stream.close(sync=True)
+            if self._npz:
+                columns, _, rows = read_stream(data)
+                with data.open("rb") as f:  # the magic line and the JSON line before the rows
+                    f.readline()
+                    f.readline()
+                    head = f.tell()
+            else:
+                columns, rows, head = _csv_rows(data)
+            if columns != self.columns:
+                raise OutputError(f"{data} has other columns than this run writes: not this run's results")
+            kept = _rows_to(rows[:, 0], t, data)
+            keep = head + kept * len(columns) * 8 if self._npz else int(_csv_row_ends(data, head)[kept - 1])
+            diag_rows = _diag_rows_to(diag_path(self.path), t)
+            self._data = AppendFile(data, "the NPZ's streamed samples" if self._npz else "results", keep=keep)
+            self._diag = AppendFile(diag_path(self.path), "diagnostics", keep=diag_rows[1])
+        except BaseException:
+            self._close_files()
+            self._lock.release()
+            raise
+        self.t_last, self.rows_written, self._count = t, kept, diag_rows[0]
 
     def rows(self, interval: Interval) -> np.ndarray:
         parts = [interval.t[:, None]] + [interval.outputs[r.subsim][r.port] for r, _ in self.signals]
@@ -296,6 +334,51 @@ def recover(path: Path) -> str:
         return f"{path}: {_span(data)}{cut or ' (complete)'}{cut_diag}"
     finally:
         lock.release()
+
+
+def _csv_rows(path: Path) -> tuple[list[str], np.ndarray, int]:
+    """Columns, rows and the header's length in bytes of a CSV result file (a torn last row left out)."""
+    if not _has_header(path, "time"):
+        raise OutputError(f"{path}: not a cosim result file to resume (no header starting with 'time,')")
+    with path.open("rb") as f:
+        head = len(f.readline(1 << 24))
+    with path.open() as f:
+        columns = next(csv.reader(f))
+    raw = path.read_bytes()
+    body = raw[head:raw.rfind(b"\n") + 1]
+    rows = np.loadtxt(io.BytesIO(body), delimiter=",", ndmin=2) if body else np.empty((0, len(columns)))
+    return columns, rows, head
+
+
+def _csv_row_ends(path: Path, head: int) -> np.ndarray:
+    """The byte offset just past each row of a CSV result file."""
+    raw = path.read_bytes()
+    ends = np.flatnonzero(np.frombuffer(raw, dtype=np.uint8) == ord("\n")) + 1
+    return ends[ends > head]
+
+
+def _rows_to(times: np.ndarray, t: float, path: Path) -> int:
+    """How many rows there are up to the one at time ``t``, which must be there."""
+    at = np.flatnonzero(times == t)
+    if at.size == 0:
+        last = f"t = {times[-1]:.9g}" if times.size else "no row"
+        raise OutputError(f"{path} has no row at the resume point t = {t!r} (it ends at {last}): run it again "
+                          "from the start")
+    return int(at[-1]) + 1
+
+
+def _diag_rows_to(path: Path, t: float) -> tuple[int, int]:
+    """Rows of the diagnostics file up to the interval ending at ``t``, and their length in bytes."""
+    if not _has_header(path, "interval"):
+        raise OutputError(f"{path}: not the diagnostics of a cosim run to resume")
+    raw = path.read_bytes()
+    lines = raw[:raw.rfind(b"\n") + 1].splitlines(keepends=True)
+    keep, size = 0, len(lines[0])
+    for line in lines[1:]:
+        if float(line.split(b",")[2]) > t:
+            break
+        keep, size = keep + 1, size + len(line)
+    return keep, size
 
 
 def _has_header(path: Path, first: str) -> bool:

@@ -20,10 +20,13 @@ from cosim.coupler.relaxation import Interval, RunSummary
 from cosim.driver import Coordinator, Deadline, Recovery, plan_for
 from cosim.handles import Description, InProcessHandle, SubsimHandle
 from cosim.launch import PRIVATE, Bus
-from cosim.outputs import reserve_output
+from cosim.outputs import OutputError, reserve_output, resume_path
 from cosim.progress import Progress
 from cosim.protocol.security import Security
 from cosim.results import ResultWriter, diag_path, output_units
+from cosim.resume import Saved, fingerprint
+from cosim.resume import load as load_resume
+from cosim.resume import save as save_resume
 from cosim.scenario import Scenario, ScenarioError
 
 Log = Callable[[str], None]
@@ -148,6 +151,30 @@ def open_session(
     return session
 
 
+def _resume_point(scenario: Scenario, method: str, output: Path, stop: float) -> Saved:
+    saved = load_resume(resume_path(output))
+    if saved.fingerprint != fingerprint(scenario.raw, method) or saved.t_start != scenario.start:
+        raise OutputError(f"{resume_path(output)} is a resume point of another scenario or method than "
+                          f"{scenario.path} --method {method} (they must be the same but for stop): run it from the "
+                          "start with --overwrite")
+    if saved.point.t >= stop:
+        raise OutputError(f"{output}: the run it continues got to t = {saved.point.t:g}, at or past --stop {stop:g}: "
+                          "nothing to resume")
+    return saved
+
+
+def _restore(session: Session, saved: Saved, where: Path) -> None:
+    """Every subsim (configured at the start) to its committed state at the resume point."""
+    if set(saved.states) != set(session.handles):
+        raise OutputError(f"{where} holds the subsims {sorted(saved.states)}, this run has {sorted(session.handles)}")
+    for name, state in saved.states.items():
+        model = session.descriptions[name].model
+        if state.model != model:
+            raise OutputError(f"{where}: {name} was a {state.model}, now it is a {model}: run it from the start "
+                              "with --overwrite")
+        session.handles[name].set_state(state)
+
+
 def build_plan(scenario: Scenario, descriptions: dict[str, Description], method: str) -> Plan:
     """The couplings checked against the described ports, once; errors name the scenario key."""
     try:
@@ -223,32 +250,44 @@ def run_scenario(
     security: Security | None = None,
     run_id: str | None = None,
     attach_wait: float = 300.0,
+    resume: bool = False,
 ) -> RunReport:
     """Run ``scenario``. ``overwrite=False`` refuses an existing result (OutputError) before anything is
-    launched; ``restarts`` and ``timeout`` override its [run] table (see ``cosim.scenario.KEYS``)."""
+    launched; ``restarts`` and ``timeout`` override its [run] table (see ``cosim.scenario.KEYS``). ``resume``:
+    go on with the interrupted run that wrote ``output``, from its latest resume point (:mod:`cosim.resume`)."""
     method = method or scenario.default_method
     settings = scenario.settings_for(method)
     stop = scenario.stop if stop is None else stop
-    output = output or default_output(scenario, method)
-    lock = reserve_output(output, overwrite)  # locked and checked before anything is launched
+    output = Path(output) if output is not None else default_output(scenario, method)
+    lock = reserve_output(output, overwrite or resume)  # locked and checked before anything is launched
     try:
+        saved = _resume_point(scenario, method, output, stop) if resume else None
+        if saved is None:
+            resume_path(output).unlink(missing_ok=True)  # an older run's: not this one's
         session = open_session(scenario, inprocess=inprocess, listen=listen, log=log, security=security,
                                run_id=run_id, external_wait=attach_wait)
     except BaseException:
         lock.release()
         raise
     try:
+        if saved is not None:
+            _restore(session, saved, resume_path(output))
         spec = scenario.run
         restarts = spec.restarts if restarts is None else restarts
         recovery = None
         if restarts and not inprocess:
             recovery = Recovery(session.revive, restarts, spec.checkpoint_every, log)
         deadline = Deadline(fixed=timeout if timeout is not None else spec.timeout)
+        checkpoints: list[Saved] = []  # taken, their intervals not yet written
+        key = fingerprint(scenario.raw, method)
         coordinator = Coordinator(session.handles, session.plans[method], settings, recovery=recovery,
-                                  deadline=deadline)
+                                  deadline=deadline, checkpoint_every=spec.checkpoint_every,
+                                  on_checkpoint=lambda point, states: checkpoints.append(
+                                      Saved(key, scenario.start, point, states)))
         writer = ResultWriter(output, output_signals(scenario, session.descriptions),
-                              output_units(session.descriptions), lock=lock)
-        bar = Progress(scenario.start, stop, enabled=progress)
+                              output_units(session.descriptions), lock=lock,
+                              resume_at=None if saved is None else saved.point.t)
+        bar = Progress(scenario.start if saved is None else saved.point.t, stop, enabled=progress)
 
         def each(interval: Interval) -> Iterator[None]:  # in steps: the coordinator writes while it waits
             try:
@@ -257,18 +296,21 @@ def run_scenario(
                 if on_interval is not None and writer.holds(interval):
                     on_interval(interval)
                 raise
+            while checkpoints and checkpoints[0].point.t <= writer.t_last:  # the results reach it: resumable
+                save_resume(resume_path(output), checkpoints.pop(0))
             bar.update(interval)
             if on_interval is not None:
                 on_interval(interval)
 
         try:
-            summary = coordinator.run(scenario.start, stop, each)
+            summary = coordinator.run(scenario.start, stop, each, resume=None if saved is None else saved.point)
         except BaseException:
             writer.close(failed_run=True)
             bar.done()
             raise
         writer.close()
         bar.done()
+        resume_path(output).unlink(missing_ok=True)  # finished: nothing to resume
         return RunReport(method, summary, output, diag_path(output), coordinator.order,
                          [str(c) for c in coordinator.feedback], {"restarts": coordinator.restarts})
     finally:

@@ -129,6 +129,9 @@ def test_a_broken_model_module_is_one_line_naming_its_file_and_line(tmp_path: Pa
     (["--attach-wait", "-5"], "--attach-wait must be a finite number of seconds > 0, got -5"),
     (["--output", "out.txt"], "--output out.txt: a result file ends in .csv or .npz (lower case)"),
     (["--output", "out.NPZ"], "--output out.NPZ: a result file ends in .csv or .npz (lower case)"),
+    (["--resume", "--overwrite"], "--resume goes on with the results; --overwrite starts them again: give one of them"),
+    (["--resume", "--method", "unified"],
+     "--resume continues coupled runs (centralized, distributed), not unified ones"),
 ])
 def test_a_bad_option_value_is_refused_naming_the_option(tmp_path: Path, args: list[str], words: str) -> None:
     """Values the scenario file's [run] table refuses are refused on the command line too (a zero timeout made every

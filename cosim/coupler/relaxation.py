@@ -128,6 +128,19 @@ class Interval:
         return max((r[-1] for r in self.residuals.values() if r), default=0.0)
 
 
+@dataclass(frozen=True)
+class ResumePoint:
+    """What the machine carries from one committed interval to the next: with every subsim's committed state
+    there, enough to go on with a run from ``t`` exactly as it would have gone on (``Relaxation.run(...,
+    resume=...)``): the last interval's converged inputs (the extrapolating first guess), and with
+    ``interval = "auto"`` the next interval's length and the inputs' largest magnitudes so far."""
+
+    t: float
+    length: float | None
+    previous: dict[str, tuple[np.ndarray, np.ndarray]]
+    magnitudes: dict[str, np.ndarray]
+
+
 @dataclass
 class RunSummary:
     t_start: float
@@ -252,6 +265,8 @@ class Relaxation:
         self._previous: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # converged inputs of the last interval
         self.round_trips = self.requests = 0  # Run actions and subsim runs emitted so far
         self._magnitudes: dict[str, np.ndarray] = {}  # interval = "auto": largest |input| per channel so far
+        self._next_length: float | None = None  # interval = "auto": the length of the interval after the last one
+        self.resume_point: ResumePoint | None = None  # at the last Commit
 
     def _action(self, stage: int, times: np.ndarray, inputs: dict[str, dict[str, np.ndarray]]) -> Run:
         self.round_trips += 1
@@ -260,23 +275,29 @@ class Relaxation:
 
     # --- the action streams -----------------------------------------------------------------------
 
-    def run(self, t_start: float, t_stop: float) -> Steps:
-        """Whole intervals from ``t_start`` (every subsim's committed time) past ``t_stop``; returns the summary."""
-        return self._run(t_start, t_stop)
+    def run(self, t_start: float, t_stop: float, resume: ResumePoint | None = None) -> Steps:
+        """Whole intervals from ``t_start`` (every subsim's committed time) past ``t_stop``; returns the summary.
+        ``resume``: go on with the run that started at ``t_start`` from that point instead (every subsim's
+        committed time is ``resume.t``), as it would have gone on."""
+        if resume is not None:
+            self._previous, self._magnitudes = dict(resume.previous), dict(resume.magnitudes)
+        return self._run(t_start, t_stop, resume)
 
     def interval(self, t0: float, t1: float) -> Steps:
         """One interval ``[t0, t1]`` (shortened by halvings when allowed), ending in one ``Commit``.
         Its length is given: ``interval = "auto"`` sizes the intervals of :meth:`run` only."""
         return self._interval(t0, t1)
 
-    def _run(self, t_start: float, t_stop: float) -> Generator[Action, Outputs | None, RunSummary]:
+    def _run(self, t_start: float, t_stop: float, resume: ResumePoint | None
+             ) -> Generator[Action, Outputs | None, RunSummary]:
         if self.settings.auto is not None:
-            return (yield from self._auto_run(t_start, t_stop, self.settings.auto))
+            return (yield from self._auto_run(t_start, t_stop, self.settings.auto, resume))
         H = self.settings.interval
-        summary = RunSummary(t_start)
-        t, trips, requests = t_start, self.round_trips, self.requests
+        t = t_start if resume is None else resume.t
+        summary = RunSummary(t)
+        trips, requests = self.round_trips, self.requests
         while t < t_stop - 1e-9 * H:
-            interval = yield from self._interval(t, interval_end(t_start, t, H))
+            interval = yield from self._interval(t, interval_end(t_start, t, H))  # on the grid from t_start
             summary.add(interval)
             t = float(interval.t[-1])
         summary.round_trips, summary.requests = self.round_trips - trips, self.requests - requests
@@ -298,7 +319,7 @@ class Relaxation:
         return (yield from self._commit(interval))
 
     def _auto_run(
-        self, t_start: float, t_stop: float, control: IntervalControl
+        self, t_start: float, t_stop: float, control: IntervalControl, resume: ResumePoint | None
     ) -> Generator[Action, Outputs | None, RunSummary]:
         """``interval = "auto"``: each interval sized by :mod:`cosim.coupler.interval_control`.
 
@@ -307,9 +328,10 @@ class Relaxation:
         ends at ``t_stop``."""
         s = self.settings
         q = order(s.interp, s.samples)
-        summary = RunSummary(t_start)
+        t, H = (t_start, control.clip(s.interval)) if resume is None or resume.length is None else (resume.t,
+                                                                                                    resume.length)
+        summary = RunSummary(t)
         trips, requests = self.round_trips, self.requests
-        t, H = t_start, control.clip(s.interval)
         while t < t_stop - 1e-9 * H:
             rejected, guessed = 0, bool(self._previous)  # the first interval's stage 0 has no extrapolation
             while True:
@@ -333,11 +355,12 @@ class Relaxation:
                 break
             interval.halvings, interval.error = rejected, ratio
             self._magnitudes = magnitudes(interval.inputs, self._magnitudes)
-            yield from self._commit(interval)
-            summary.add(interval)
             if t1 - t >= H * (1 - 1e-9):  # a clipped last interval says nothing about a longer one
                 stages = interval.stages if guessed or s.first_guess != "extrapolate" else 1  # the error decides
                 H = next_length(H, ratio, stages, q, control)
+            self._next_length = H  # before the commit: part of its resume point
+            yield from self._commit(interval)
+            summary.add(interval)
             t = t1
         summary.round_trips, summary.requests = self.round_trips - trips, self.requests - requests
         yield Done(summary)
@@ -345,6 +368,7 @@ class Relaxation:
 
     def _commit(self, interval: Interval) -> Generator[Action, Outputs | None, Interval]:
         self._previous = {k: (interval.t, v) for k, v in interval.inputs.items()}
+        self.resume_point = ResumePoint(float(interval.t[-1]), self._next_length, self._previous, self._magnitudes)
         yield Commit(interval)
         return interval
 

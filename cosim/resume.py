@@ -1,0 +1,81 @@
+"""Resume points of a run on disk: ``<results>.resume.npz`` (:func:`~cosim.outputs.resume_path`), so that an
+interrupted run goes on where it was.
+
+Every checkpoint (each ``[run] checkpoint_every`` intervals) the coordinator has every subsim's committed state and
+the coupler's :class:`~cosim.coupler.relaxation.ResumePoint`. Once the results are written up to that point, the
+runner saves both here, atomically; ``cosim run --resume`` restores the subsims to them, cuts the results back to
+that point and goes on, with the same results as a run that was never interrupted. A run that ends normally
+removes the file.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from cosim.coupler.relaxation import ResumePoint
+from cosim.handles import SubsimState
+from cosim.outputs import OutputError, atomic_write
+
+FORMAT = "cosim resume point"
+
+
+def fingerprint(raw: object, method: str) -> str:
+    """What must not change between a run and its resumption: the scenario's tables (but its stop: a run may be
+    resumed to go further) and the method."""
+    tables = {k: v for k, v in dict(raw).items() if k != "stop"} if isinstance(raw, dict) else raw
+    text = json.dumps([tables, method], sort_keys=True, default=repr)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+@dataclass(frozen=True)
+class Saved:
+    fingerprint: str
+    t_start: float
+    point: ResumePoint
+    states: dict[str, SubsimState]
+
+
+def save(path: Path, saved: Saved) -> None:
+    arrays: dict[str, np.ndarray] = {}
+    for name, st in saved.states.items():
+        arrays[f"state/{name}"] = st.state
+    for key, (t, v) in saved.point.previous.items():
+        arrays[f"previous_t/{key}"], arrays[f"previous/{key}"] = t, v
+    for key, m in saved.point.magnitudes.items():
+        arrays[f"magnitude/{key}"] = m
+    meta = {"format": FORMAT, "fingerprint": saved.fingerprint, "t_start": saved.t_start, "t": saved.point.t,
+            "length": saved.point.length,
+            "subsims": {name: {"time": st.time, "model": st.model} for name, st in saved.states.items()}}
+    arrays["meta"] = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
+
+    def write(f: io.BufferedIOBase) -> None:
+        np.savez(f, **arrays)
+
+    atomic_write(path, write)
+
+
+def load(path: Path) -> Saved:
+    """The resume point in ``path``; OutputError in one line when there is none or it is not one."""
+    if not path.is_file():
+        raise OutputError(f"no resume point {path}: the run stopped before its first checkpoint, or ended (a "
+                          "finished run removes it); run it again from the start")
+    try:
+        with np.load(path) as z:
+            meta = json.loads(bytes(z["meta"]).decode())
+            if meta.get("format") != FORMAT:
+                raise ValueError("not a resume point")
+            states = {name: SubsimState(float(s["time"]), z[f"state/{name}"], s["model"])
+                      for name, s in meta["subsims"].items()}
+            previous = {k.removeprefix("previous/"): (z[f"previous_t/{k.removeprefix('previous/')}"], z[k])
+                        for k in z.files if k.startswith("previous/")}
+            magnitudes = {k.removeprefix("magnitude/"): z[k] for k in z.files if k.startswith("magnitude/")}
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise OutputError(f"{path} is not a resume point cosim can read ({exc})") from None
+    point = ResumePoint(float(meta["t"]), meta["length"], previous, magnitudes)
+    return Saved(meta["fingerprint"], float(meta["t_start"]), point, states)
