@@ -134,6 +134,10 @@ def main(model_cls: type[Subsim] | Subsim, argv: Sequence[str] | None = None, pr
     try:
         try:  # zenoh.open holds the signals until it returns (within --connect-timeout)
             runtime = Runtime(model_cls, name=args.name, history_limit=args.history)
+            if not args.quiet_stop:  # started by hand (not launched by cosim run): its owner watches this terminal
+                runtime.on_model_error = lambda cmd, exc: say(
+                    f"{args.name}: {cmd} failed: [{exc.code}] {exc.message}"
+                    + (f"\n{exc.traceback.rstrip()}" if exc.traceback else ""))
             session = zenoh.open(client_config(args.connect, args.connect_timeout, int(args.lease * 1000),
                                               security=args.security))
         except zenoh.ZError as exc:

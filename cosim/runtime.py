@@ -64,6 +64,9 @@ def as_factory(model: Subsim | ModelFactory) -> ModelFactory:
     raise TypeError(f"a subsim model must be a Subsim instance or a factory making one, got {model!r}")
 
 
+MODEL_FAULTS = frozenset({"model_error", "model_exception"})  # error codes that are the model's, not the caller's
+
+
 class Runtime:
     """Commit/rollback bookkeeping around one :class:`Subsim` model.
 
@@ -88,6 +91,9 @@ class Runtime:
         self.epoch = 0
         self.requests = 0
         self.shutdown_requested = False
+        # told of every error the model caused (model_error, model_exception), e.g. to show it to the model's
+        # owner at the subsim's own terminal as well as in the coordinator's reply
+        self.on_model_error: Callable[[str, CosimError], None] | None = None
         self._commands: dict[str, Callable[..., dict]] = {
             "describe": self.describe,
             "configure": self.configure,
@@ -113,7 +119,9 @@ class Runtime:
             raise CosimError("unknown_command", f"unknown command {cmd!r}")
         try:
             return fn(**args)
-        except CosimError:
+        except CosimError as exc:
+            if self.on_model_error is not None and exc.code in MODEL_FAULTS:
+                self.on_model_error(cmd, exc)
             raise
         except TypeError as exc:  # wrong keyword arguments from an in-process caller
             raise CosimError("bad_request", f"{cmd}: {exc}") from None

@@ -12,7 +12,7 @@ import time
 import numpy as np
 import pytest
 
-from cosim.contract import SubsimDied
+from cosim.contract import SubsimDied, SubsimError
 from cosim.launch import Bus, subsim_command
 
 TIMES = np.linspace(0.0, 0.4, 5)
@@ -107,3 +107,48 @@ def test_bad_command_line_is_rejected() -> None:
     cmd = [sys.executable, "-m", "subsims.integrator", "--connect", "tcp/127.0.0.1:1", "--run", "a/b*"]
     done = subprocess.run(cmd, capture_output=True, text=True, timeout=30)
     assert done.returncode == 2 and "--run" in done.stderr
+
+
+RAISING = """
+import numpy as np
+from cosim import Subsim
+
+
+class Raising(Subsim):
+    inputs = {"u": 1}
+    outputs = {"y": 1}
+
+    def initial_state(self, params):
+        return np.zeros(1)
+
+    def advance(self, state, times, u):
+        return 1 / 0
+"""
+
+
+def test_a_subsim_started_by_hand_shows_its_models_errors_on_its_own_terminal(tmp_path) -> None:
+    """An external subsim's owner watches its terminal: the model's error showed only in the coordinator's."""
+    (tmp_path / "raising.py").write_text(RAISING)
+    bus = Bus.open()
+    popen = subprocess.Popen(subsim_command("", bus.endpoint, bus.run, "boom", model="raising:Raising"),
+                             env={**os.environ, **bus.subsim_env("boom"), "PYTHONPATH": str(tmp_path)},
+                             stderr=subprocess.PIPE, text=True)
+    try:
+        handle = bus.attach("boom")
+        handle.configure({})
+        with pytest.raises(SubsimError) as err:
+            handle.run_interval(TIMES, {"u": np.zeros((5, 1))})
+        assert err.value.code == "model_exception"
+        with pytest.raises(SubsimError):  # the caller's mistake is the caller's to see: not printed there
+            handle.run_interval(TIMES, {"u": np.zeros((4, 1))})
+        bus.close()
+        assert popen.wait(10) == 0
+        err_text = popen.stderr.read()
+    finally:
+        if popen.poll() is None:
+            popen.kill()
+            popen.wait()
+        bus.close()
+    assert "boom: run_interval failed: [model_exception] advance() raised ZeroDivisionError: division by zero" \
+        in err_text, err_text
+    assert 'raising.py", line 14, in advance' in err_text and "bad_value" not in err_text, err_text
