@@ -13,8 +13,10 @@ from __future__ import annotations
 import hashlib
 import io
 import json
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -25,10 +27,13 @@ from cosim.outputs import OutputError, atomic_write
 FORMAT = "cosim resume point"
 
 
-def fingerprint(raw: object, method: str) -> str:
-    """What must not change between a run and its resumption: the scenario's tables (but its stop: a run may be
-    resumed to go further) and the method."""
-    tables = {k: v for k, v in dict(raw).items() if k != "stop"} if isinstance(raw, dict) else raw
+IRRELEVANT = {"stop", "run", "description"}  # a run may be resumed to go further, with other restarts or timeouts
+
+
+def fingerprint(raw: Mapping[str, Any], method: str) -> str:
+    """What must not change between a run and its resumption: the scenario's tables (but for IRRELEVANT ones)
+    and the method."""
+    tables = {k: v for k, v in raw.items() if k not in IRRELEVANT}
     text = json.dumps([tables, method], sort_keys=True, default=repr)
     return hashlib.sha256(text.encode()).hexdigest()
 

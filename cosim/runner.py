@@ -296,7 +296,7 @@ def run_scenario(
                 if on_interval is not None and writer.holds(interval):
                     on_interval(interval)
                 raise
-            while checkpoints and checkpoints[0].point.t <= writer.t_last:  # the results reach it: resumable
+            while checkpoints and writer.t_last is not None and checkpoints[0].point.t <= writer.t_last:  # written
                 save_resume(resume_path(output), checkpoints.pop(0))
             bar.update(interval)
             if on_interval is not None:
