@@ -28,6 +28,7 @@ import re
 import sys
 import tempfile
 import time
+import tomllib
 from collections import Counter, deque
 from pathlib import Path
 
@@ -50,12 +51,26 @@ def shipped() -> dict[str, dict]:
     for path in sorted(ROOT.glob("scenarios/**/*.toml")):
         try:
             scenario = load(path)
-        except Exception:
+        except Exception:  # e.g. an FMU scenario whose FMU is not built yet (with_fmu_built builds it)
+            found.update({m: p for m, p in _fmu_shorthands(path).items() if m not in found})
             continue
         for spec in scenario.subsims.values():
             if spec.model and spec.model not in found:
                 found[spec.model] = dict(spec.params)
     return {**found, **{m: p for m, p in EXTRA.items() if m not in found}}
+
+
+def _fmu_shorthands(path: Path) -> dict[str, dict]:
+    """The FMU subsim's params of the first ``fmu = "..."`` subsim in a scenario file, read as plain TOML."""
+    try:
+        tables = tomllib.loads(path.read_text()).get("subsims", {})
+    except (OSError, tomllib.TOMLDecodeError):
+        return {}
+    for table in tables.values():
+        if isinstance(table, dict) and isinstance(table.get("fmu"), str):
+            fmu = str((path.parent / table["fmu"]).resolve())
+            return {"subsims.fmu:FmuSubsim": {**table.get("params", {}), "fmu": fmu}}
+    return {}
 
 
 def with_fmu_built(params: dict, build_dir: Path) -> dict:
