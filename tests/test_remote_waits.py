@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+import signal
 import time
 
 import numpy as np
@@ -95,3 +97,24 @@ def test_looking_for_the_reply_never_blocks_and_the_reply_it_finds_is_the_result
         assert time.monotonic() < deadline
         time.sleep(0.01)
     assert pending.ended and list(pending.all_replies()) == []
+
+
+def test_a_late_delete_of_a_predecessors_token_is_not_the_subsims_death(cosim_bus: Bus) -> None:
+    """A process killed to be replaced loses its liveliness token when the router notices, which can be after
+    its successor's token came: the successor's handle then saw a DELETE and called it gone (a replacement
+    'died' while being restored, in CI). A token still on the key means the subsim is served."""
+    proc = cosim_bus.spawn("subsims.integrator", "successor")
+    handle = proc.handle
+
+    class Late:
+        kind = zenoh.SampleKind.DELETE
+
+    handle._on_liveliness(Late())  # the predecessor's token, removed late
+    assert handle.status()["name"] == "successor" and handle.alive
+    os.kill(proc.popen.pid, signal.SIGKILL)  # and a real death is still one
+    proc.popen.wait()
+    deadline = time.monotonic() + 10
+    while handle.alive and time.monotonic() < deadline:
+        time.sleep(0.01)
+    with pytest.raises(SubsimDied):
+        handle.status()
