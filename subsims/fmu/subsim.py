@@ -35,7 +35,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy.integrate import solve_ivp
+from scipy.integrate import BDF, DOP853, LSODA, RK23, RK45, Radau
 
 from cosim.subsim import InputFunction, ModelError, Port, Subsim
 from subsims.fmu.fmu import FmiCallError, FmuError, FmuInfo, Instance, RealPorts, coerce, read_fmu
@@ -44,7 +44,8 @@ SETTINGS = {"fmu", "interface", "substeps", "solver", "rtol", "atol", "max_step"
             "start_time", "values"}
 MAGIC = 46_707_781.0  # first element of every FMU state vector
 BYTES_PER_FLOAT = 6
-SOLVERS = ("RK45", "RK23", "DOP853", "Radau", "BDF", "LSODA")
+SOLVER_CLASSES = {"RK45": RK45, "RK23": RK23, "DOP853": DOP853, "Radau": Radau, "BDF": BDF, "LSODA": LSODA}
+SOLVERS = tuple(SOLVER_CLASSES)
 
 
 def encode_state(data: bytes, capacity: int) -> np.ndarray:
@@ -287,7 +288,7 @@ class FmuSubsim(Subsim):
 
     def _advance_me(self, inst: Instance, times: np.ndarray, u: InputFunction) -> np.ndarray:
         n = self.info.n_states
-        t0, t1 = float(times[0]), float(times[-1])
+        t1 = float(times[-1])
 
         def rhs(t: float, x: np.ndarray) -> np.ndarray:
             inst.set_time(t)
@@ -299,15 +300,11 @@ class FmuSubsim(Subsim):
             states = np.zeros((0, times.size))
         else:
             try:
-                sol = solve_ivp(rhs, (t0, t1), inst.get_states(n), method=self.solver, t_eval=times,
-                                rtol=self.rtol, atol=self.atol, max_step=self.max_step)
-            except FmiCallError:
+                states = self._integrate(inst, rhs, inst.get_states(n), times, u)
+            except (FmiCallError, ModelError):
                 raise
             except Exception as exc:  # an FMI call inside the right-hand side failed
                 raise FmiCallError(f"model exchange right-hand side: {inst._why(exc)}") from None
-            if not sol.success:
-                raise ModelError(f"solve_ivp ({self.solver}) failed: {sol.message}")
-            states = sol.y
         inputs = self._input_matrix(u, np.asarray(times, dtype=np.float64))
         out = np.empty((times.size, len(self._out_ports.vrs)))
         for i, t in enumerate(times):
@@ -316,7 +313,32 @@ class FmuSubsim(Subsim):
             if n:
                 inst.set_states(states[:, i])
             out[i] = inst.get_reals(self._out_ports)
-        if inst.completed_step():
+        if n == 0 and inst.completed_step():
             raise ModelError(f"the FMU asks for event handling at t={t1!r}; model exchange events are not supported "
                              "(use interface = 'cs')")
         return out
+
+    def _integrate(self, inst: Instance, rhs: Any, x0: np.ndarray, times: np.ndarray, u: InputFunction) -> np.ndarray:
+        """The states at ``times`` (n x samples), as ``solve_ivp(..., t_eval=times)`` gives them (the same steps and
+        dense output), and after every accepted step fmiCompletedIntegratorStep, at that step's end, as FMI asks:
+        an FMU that wants event mode then is refused there, not at the interval's end."""
+        solver = SOLVER_CLASSES[self.solver](rhs, float(times[0]), x0, float(times[-1]), rtol=self.rtol,
+                                             atol=self.atol, max_step=self.max_step)
+        columns, k = [], 0
+        while k < times.size:
+            message = solver.step()
+            if solver.status == "failed":
+                raise ModelError(f"solve_ivp ({self.solver}) failed: {message}")
+            upto = int(np.searchsorted(times, solver.t, side="right"))
+            if upto > k:
+                columns.append(solver.dense_output()(times[k:upto]))
+                k = upto
+            inst.set_time(solver.t)
+            inst.set_reals(self._in_ports, self._input_matrix(u, np.array([solver.t]))[0])
+            inst.set_states(solver.y)
+            if inst.completed_step():
+                raise ModelError(f"the FMU asks for event handling at t={float(solver.t)!r} (a step event); model "
+                                 "exchange events are not supported (use interface = 'cs')")
+            if solver.status == "finished":
+                break
+        return np.hstack(columns)

@@ -26,7 +26,8 @@ def _needs_gcc() -> None:
 @pytest.fixture(scope="session")
 def fmus(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     """``mass2``, ``mass3`` (FMI 2.0 / 3.0, CS + ME, state serialization), ``mass2_nostate``,
-    ``mass3_nostate`` (cannot save state), ``mass3_f32`` (v and F are Float32), and broken ones:
+    ``mass3_nostate`` (cannot save state), ``mass3_f32`` (v and F are Float32), ``mass2_step_event`` (model
+    exchange asks for event mode at its first integrator step from t = 0.25), and broken ones:
     ``not_zip``, ``no_description``, ``no_binary``, ``other_platform``, ``bad_binary`` (it cannot load),
     ``bad_description``."""
     _needs_gcc()
@@ -34,6 +35,7 @@ def fmus(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     built = {f"mass{v}": build_mass.build_mass_fmu(out, v) for v in (2, 3)}
     built.update({f"mass{v}_nostate": build_mass.build_mass_fmu(out, v, state=False) for v in (2, 3)})
     built["mass3_f32"] = build_mass.build_mass_fmu(out, 3, float32=True)
+    built["mass2_step_event"] = build_mass.build_mass_fmu(out, 2, name="mass2_step_event", step_event_at=0.25)
     so = out / "build-mass2" / "mass.so"
     xml = build_mass.model_description(2)
     (out / "not_zip.fmu").write_bytes(b"this is not a zip archive\n" * 10)

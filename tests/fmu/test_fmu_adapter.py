@@ -127,6 +127,20 @@ def test_model_exchange_reads_inputs_between_samples(fmus: dict[str, Path], vers
     np.testing.assert_allclose(u, forced(t, 0.5, 0.0, a, b), rtol=0, atol=1e-8)
 
 
+def test_model_exchange_asks_after_every_integrator_step_whether_the_fmu_wants_an_event(fmus: dict[str, Path]) -> None:
+    """fmi2CompletedIntegratorStep after each accepted step (FMI 2.0, 3.2.2): an FMU asking for event mode from
+    t = 0.25 on is refused at the step that got there, not at the interval's end (t = 0.4, as before)."""
+    rt = configured(fmus["mass2_step_event"], interface="me", u0=0.5)
+    t = np.linspace(0.0, 0.4, 9)
+    with pytest.raises(CosimError) as err:
+        run(rt, t, np.zeros(9))
+    assert err.value.code == "model_error" and "(a step event)" in err.value.message, err.value.message
+    at = float(err.value.message.split("event handling at t=")[1].split(" ")[0])
+    assert 0.25 <= at < 0.4, err.value.message
+    ok = configured(fmus["mass2"], interface="me", u0=0.5)  # the same FMU without the event runs through
+    assert run(ok, t, np.zeros(9))["outputs"]["u"].shape == (9, 1)
+
+
 def test_cosimulation_substeps_shrink_the_hold_error(fmus: dict[str, Path]) -> None:
     """Holding the force over each communication step is first order in the step: eight communication
     steps per sample interval (inputs from the interpolated segment) must cut the error about eightfold."""

@@ -147,10 +147,17 @@ fmi2Status fmi2NewDiscreteStates(fmi2Component c, fmi2EventInfo *info) {
 
 fmi2Status fmi2EnterContinuousTimeMode(fmi2Component c) { (void)c; return fmi2OK; }
 
+/* Built with MASS_STEP_EVENT_AT = t >= 0, model exchange asks for event mode at the first completed integrator step
+   at or after t (a step event: the environment must ask after every step to see it in time). */
+#ifndef MASS_STEP_EVENT_AT
+#define MASS_STEP_EVENT_AT -1.0
+#endif
+
 fmi2Status fmi2CompletedIntegratorStep(fmi2Component c, fmi2Boolean noSetPrior, fmi2Boolean *enterEvent,
                                        fmi2Boolean *terminate) {
-    (void)c; (void)noSetPrior;
-    *enterEvent = fmi2False;
+    (void)noSetPrior;
+    double at = MASS_STEP_EVENT_AT;
+    *enterEvent = (at >= 0.0 && ((Instance *)c)->d.time >= at) ? fmi2True : fmi2False;
     *terminate = fmi2False;
     return fmi2OK;
 }
