@@ -79,6 +79,14 @@ def test_peek_command_reads_what_encode_request_wrote_and_nothing_else() -> None
         assert peek_command(other) is None
 
 
+def settle(server: CommandServer) -> None:
+    """The serving thread lets the next request in just after its reply went out: one sent at once may still find
+    it busy and be queued (a race seen on a loaded machine, after configure and after a first run_interval)."""
+    deadline = time.monotonic() + 5.0
+    while server._busy and time.monotonic() < deadline:
+        time.sleep(0.001)
+
+
 def test_quick_requests_are_answered_on_arrival_slow_ones_by_the_serving_thread(cosim_bus: Bus) -> None:
     with served(cosim_bus, "inline") as (server, runtime, handle):
         # s: generous, a quick run on a loaded machine can be preempted for tens of ms (seen: a run over 20 ms)
@@ -87,6 +95,7 @@ def test_quick_requests_are_answered_on_arrival_slow_ones_by_the_serving_thread(
         mark, inline = len(runtime.threads), server.inline_count
         handle.status()
         handle.run_interval(TIMES, {"u": np.ones((5, 1))})  # the first: its time is not known yet
+        settle(server)
         handle.run_interval(TIMES, {"u": np.ones((5, 1))})  # quick last time: answered on arrival
         handle.get_state()
         assert answered_by(runtime, mark) == [("status", False), ("run_interval", True), ("run_interval", False),
@@ -134,11 +143,7 @@ def test_a_request_answered_on_arrival_does_not_wake_the_serving_thread(cosim_bu
     """Waking it for nothing cost every quick request a thread switch (about 30 us of the subsim's CPU)."""
     with served(cosim_bus, "quiet") as (server, runtime, handle):
         handle.configure({"size": 1})
-        # the serving thread answered configure and lets the next request in just after its reply went out: a status
-        # sent at once may still find it busy and be queued (a race seen once on a loaded machine)
-        deadline = time.monotonic() + 5.0
-        while server._busy and time.monotonic() < deadline:
-            time.sleep(0.001)
+        settle(server)
         woken = []
         notify = server._ready.notify
         server._ready.notify = lambda n=1: (woken.append(n), notify(n))  # type: ignore[method-assign]
