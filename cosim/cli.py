@@ -35,11 +35,11 @@ def _run(args: argparse.Namespace) -> int:
             return _run_until_done(args, state)
     except interrupt.Interrupted as exc:
         if state["t"] is None:
-            where = "before any interval was committed"
+            where = "before any new interval was committed" if args.resume else "before any interval was committed"
         else:
             where = f"at t = {state['t']:.6g} s; every committed interval is in {state['output']}"
-            if resume_path(Path(state["output"])).exists():
-                where += " (go on with the same command and --resume)"
+        if state["output"] is not None and resume_path(Path(state["output"])).exists():
+            where += " (go on with the same command and --resume)"
         print(f"cosim: stopped by {exc.name} {where}", file=sys.stderr, flush=True)
         return exc.exit_status
 

@@ -411,9 +411,9 @@ class Coordinator:
         self._commits += 1
         if self._commits % self._checkpoint_every == 0:
             self._checkpoint()
-            if self.on_checkpoint is not None:
-                assert self._machine is not None and self._machine.resume_point is not None
-                self.on_checkpoint(self._machine.resume_point, dict(self._checkpoints))
+            point = None if self._machine is None else self._machine.resume_point
+            if self.on_checkpoint is not None and point is not None:
+                self.on_checkpoint(point, dict(self._checkpoints))
 
     def _call_replacing(self, name: str, call: Callable[[SubsimHandle], T]) -> T:
         """``call(handle)`` outside a run (a checkpoint, a rollback); a subsim that died or hung meanwhile is

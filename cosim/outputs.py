@@ -157,6 +157,8 @@ def reserve_output(path: Path, overwrite: bool = False) -> OutputLock:
                           "choose another --output") from None
     lock = OutputLock.acquire(path)
     try:
+        for stale in path.parent.glob(f".{path.name}*.tmp-*"):  # an atomic write's, cut short by a SIGKILL
+            stale.unlink(missing_ok=True)  # (the lock is ours: no run writes these files now)
         if not overwrite:  # the result, and its companions too (diagnostics, units, an NPZ's stream)
             for f in run_files(path):
                 if f.exists():

@@ -94,6 +94,7 @@ class ResultWriter:
         self.t_last: float | None = None  # time of the last row written
         self.rows_written = 0
         self.failed = False
+        self._resumed = False  # going on with an interrupted run's files: never removed here
         self._count = 0
         self._data: AppendFile | None = None
         self._diag: AppendFile | None = None
@@ -124,9 +125,13 @@ class ResultWriter:
 
     def _resume(self, t: float) -> None:
         data = stream_path(self.path) if self._npz else self.path
+        rebuilt = False
         try:
-            if self._npz and not data.exists() and self.path.exists():  # the stopped run built its NPZ: stream again
+            if self._npz and not data.exists():  # the stopped run built its NPZ: stream it again
+                if not self.path.exists():
+                    raise OutputError(f"neither {self.path} nor {data} exists: nothing to resume")
                 columns, rows = read_results(self.path)
+                rebuilt = True
                 stream = AppendFile(data, "the NPZ's streamed samples")
                 try:
                     stream.append(stream_header(columns, [read_units(self.path).get(c, "") for c in columns]))
@@ -148,11 +153,17 @@ class ResultWriter:
             diag_rows = _diag_rows_to(diag_path(self.path), t)
             self._data = AppendFile(data, "the NPZ's streamed samples" if self._npz else "results", keep=keep)
             self._diag = AppendFile(diag_path(self.path), "diagnostics", keep=diag_rows[1])
-        except BaseException:
+        except BaseException as exc:
             self._close_files()
+            if rebuilt and self._data is None:  # refused: the NPZ stays as it was, alone
+                data.unlink(missing_ok=True)
             self._lock.release()
+            if isinstance(exc, Exception) and not isinstance(exc, OutputError):  # a damaged file: say which
+                raise OutputError(f"cannot resume from {self.path} and its companions: {type(exc).__name__}: "
+                                  f"{' '.join(str(exc).split())[:200]}") from None
             raise
         self.t_last, self.rows_written, self._count = t, kept, diag_rows[0]
+        self._resumed = True
 
     def rows(self, interval: Interval) -> np.ndarray:
         parts = [interval.t[:, None]] + [interval.outputs[r.subsim][r.port] for r, _ in self.signals]
@@ -221,7 +232,7 @@ class ResultWriter:
         with interrupt.deferred():
             try:
                 self._close_files()
-                if failed_run and self._count == 0:
+                if failed_run and self._count == 0 and not self._resumed:
                     for path in (self.path, stream_path(self.path), diag_path(self.path), meta_path(self.path)):
                         path.unlink(missing_ok=True)
                     return
@@ -368,16 +379,24 @@ def _rows_to(times: np.ndarray, t: float, path: Path) -> int:
 
 
 def _diag_rows_to(path: Path, t: float) -> tuple[int, int]:
-    """Rows of the diagnostics file up to the interval ending at ``t``, and their length in bytes."""
+    """Rows of the diagnostics file up to the interval ending at ``t``, and their length in bytes: they must be the
+    intervals 1, 2, ... in order, the last one ending at ``t``."""
     if not _has_header(path, "interval"):
         raise OutputError(f"{path}: not the diagnostics of a cosim run to resume")
     raw = path.read_bytes()
     lines = raw[:raw.rfind(b"\n") + 1].splitlines(keepends=True)
-    keep, size = 0, len(lines[0])
+    keep, size, end = 0, len(lines[0]), None
     for line in lines[1:]:
-        if float(line.split(b",")[2]) > t:
+        number, _, t1 = line.split(b",")[:3]
+        if float(t1) > t:
             break
-        keep, size = keep + 1, size + len(line)
+        if int(number) != keep + 1:
+            raise OutputError(f"{path}: interval {keep + 1} is missing (the file was cut or edited): run it again "
+                              "from the start")
+        keep, size, end = keep + 1, size + len(line), float(t1)
+    if end != t:
+        raise OutputError(f"{path} does not reach the resume point t = {t!r} (it ends at "
+                          f"{'no interval' if end is None else f't = {end!r}'}): run it again from the start")
     return keep, size
 
 

@@ -71,7 +71,7 @@ def load(path: Path) -> Saved:
         raise OutputError(f"no resume point {path}: the run stopped before its first checkpoint, or ended (a "
                           "finished run removes it); run it again from the start")
     try:
-        with np.load(path) as z:
+        with np.load(path, allow_pickle=False) as z:
             meta = json.loads(bytes(z["meta"]).decode())
             if meta.get("format") != FORMAT:
                 raise ValueError("not a resume point")
@@ -80,7 +80,9 @@ def load(path: Path) -> Saved:
             previous = {k.removeprefix("previous/"): (z[f"previous_t/{k.removeprefix('previous/')}"], z[k])
                         for k in z.files if k.startswith("previous/")}
             magnitudes = {k.removeprefix("magnitude/"): z[k] for k in z.files if k.startswith("magnitude/")}
-    except (OSError, ValueError, KeyError, TypeError) as exc:
-        raise OutputError(f"{path} is not a resume point cosim can read ({exc})") from None
+    except Exception as exc:  # whatever a cut or damaged file makes zipfile or numpy raise
+        why = " ".join(str(exc).split())[:120]
+        raise OutputError(f"{path} is damaged or not a resume point ({type(exc).__name__}: {why}): run it again "
+                          "from the start with --overwrite") from None
     point = ResumePoint(float(meta["t"]), meta["length"], previous, magnitudes)
     return Saved(meta["fingerprint"], float(meta["t_start"]), point, states)

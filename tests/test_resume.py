@@ -113,3 +113,53 @@ def test_cosim_run_resume_after_sigint_over_zenoh(tmp_path: Path) -> None:
     done = subprocess.run([*cosim, "--output", str(part), "--resume"], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
     assert part.read_bytes() == whole.read_bytes()
+
+
+def test_a_last_interval_cut_to_end_at_stop_is_no_resume_point(tmp_path: Path) -> None:
+    """interval = "auto" cuts its last interval to end at stop; a run going further does not end an interval
+    there, so resuming from it with a later stop gave other results. Stopped in that last interval (a resume
+    point at every interval), the run resumes from the one before, and matches the longer run."""
+    sc = every(AUTO, 1)
+    whole, part = tmp_path / "whole.csv", tmp_path / "part.csv"
+    run_scenario(sc, stop=600.0, output=whole, inprocess=True, progress=False)
+
+    def at_the_end(interval) -> None:
+        if float(interval.t[-1]) == 300.0:
+            raise Stop
+
+    with pytest.raises(Stop):
+        run_scenario(sc, stop=300.0, output=part, inprocess=True, progress=False, on_interval=at_the_end)
+    run_scenario(sc, stop=600.0, output=part, inprocess=True, progress=False, resume=True)
+    assert part.read_bytes() == whole.read_bytes()
+
+
+@pytest.mark.parametrize("damage", ["diag cut", "diag edited", "resume point cut", "results edited"])
+def test_damaged_files_are_refused_in_one_line_and_left_as_they_are(tmp_path: Path, damage: str) -> None:
+    sc = every(OSCILLATOR, 10)
+    out = tmp_path / "x.csv"
+    with pytest.raises(Stop):
+        run_scenario(sc, stop=3.0, output=out, inprocess=True, progress=False, on_interval=stop_after(47))
+    target = {"diag cut": Path(f"{out}.diag.csv"), "diag edited": Path(f"{out}.diag.csv"),
+              "resume point cut": resume_path(out), "results edited": out}[damage]
+    raw = target.read_bytes()
+    lines = raw.splitlines(keepends=True)
+    damaged = {"diag cut": b"".join(lines[:20]), "diag edited": b"".join(lines[:10] + [b"abc\n"] + lines[11:]),
+               "resume point cut": raw[:1200], "results edited": b"".join(lines[:50] + [b"a,b,c\n"] + lines[51:])}
+    target.write_bytes(damaged[damage])
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    with pytest.raises(OutputError) as err:
+        run_scenario(sc, stop=3.0, output=out, inprocess=True, progress=False, resume=True)
+    assert "\n" not in str(err.value) and ("run it again" in str(err.value) or "cannot resume" in str(err.value))
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
+
+
+def test_an_atomic_write_cut_short_leaves_nothing_for_long(tmp_path: Path) -> None:
+    """A SIGKILL while a resume point (or an NPZ) was being written left ``.<file>.tmp-<pid>`` for good: the next run
+    on that output, holding its lock, removes them."""
+    out = tmp_path / "x.csv"
+    stale = tmp_path / ".x.csv.resume.npz.tmp-99999"
+    stale.write_bytes(b"half")
+    other = tmp_path / ".y.csv.resume.npz.tmp-99999"  # another output's: not this run's to remove
+    other.write_bytes(b"half")
+    run_scenario(every(OSCILLATOR, 10), stop=0.5, output=out, inprocess=True, progress=False)
+    assert not stale.exists() and other.exists()

@@ -266,7 +266,7 @@ class Relaxation:
         self.round_trips = self.requests = 0  # Run actions and subsim runs emitted so far
         self._magnitudes: dict[str, np.ndarray] = {}  # interval = "auto": largest |input| per channel so far
         self._next_length: float | None = None  # interval = "auto": the length of the interval after the last one
-        self.resume_point: ResumePoint | None = None  # at the last Commit
+        self.resume_point: ResumePoint | None = None  # at the last Commit (None: not a point to go on from)
 
     def _action(self, stage: int, times: np.ndarray, inputs: dict[str, dict[str, np.ndarray]]) -> Run:
         self.round_trips += 1
@@ -338,6 +338,7 @@ class Relaxation:
                 t1 = t + H
                 if t1 >= t_stop - 1e-3 * H:  # no sliver left after the last interval
                     t1 = t_stop
+                clipped = t1 != t + H  # cut to end at t_stop: a run going further would not end an interval there
                 times = sample_times(t, t1, s.samples)
                 try:
                     interval = yield from self._converge(times)
@@ -359,16 +360,17 @@ class Relaxation:
                 stages = interval.stages if guessed or s.first_guess != "extrapolate" else 1  # the error decides
                 H = next_length(H, ratio, stages, q, control)
             self._next_length = H  # before the commit: part of its resume point
-            yield from self._commit(interval)
+            yield from self._commit(interval, resumable=not clipped)
             summary.add(interval)
             t = t1
         summary.round_trips, summary.requests = self.round_trips - trips, self.requests - requests
         yield Done(summary)
         return summary
 
-    def _commit(self, interval: Interval) -> Generator[Action, Outputs | None, Interval]:
+    def _commit(self, interval: Interval, resumable: bool = True) -> Generator[Action, Outputs | None, Interval]:
         self._previous = {k: (interval.t, v) for k, v in interval.inputs.items()}
-        self.resume_point = ResumePoint(float(interval.t[-1]), self._next_length, self._previous, self._magnitudes)
+        self.resume_point = (ResumePoint(float(interval.t[-1]), self._next_length, self._previous, self._magnitudes)
+                             if resumable else None)
         yield Commit(interval)
         return interval
 
