@@ -25,8 +25,6 @@ from cosim.handles import SubsimState
 from cosim.outputs import OutputError, atomic_write
 
 FORMAT = "cosim resume point"
-
-
 IRRELEVANT = {"stop", "run", "description"}  # a run may be resumed to go further, with other restarts or timeouts
 
 
@@ -40,6 +38,9 @@ def fingerprint(raw: Mapping[str, Any], method: str) -> str:
 
 @dataclass(frozen=True)
 class Saved:
+    """A resume point as saved: whose run it is (``fingerprint``, the run's start), the coupler's point, and every
+    subsim's committed state there."""
+
     fingerprint: str
     t_start: float
     point: ResumePoint
@@ -47,6 +48,7 @@ class Saved:
 
 
 def save(path: Path, saved: Saved) -> None:
+    """Write ``saved`` to ``path`` atomically (readers see the previous point or this one whole)."""
     arrays: dict[str, np.ndarray] = {}
     for name, st in saved.states.items():
         arrays[f"state/{name}"] = st.state
