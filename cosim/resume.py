@@ -31,9 +31,18 @@ IRRELEVANT = {"stop", "run", "description"}  # a run may be resumed to go furthe
 def fingerprint(raw: Mapping[str, Any], method: str) -> str:
     """What must not change between a run and its resumption: the scenario's tables (but for IRRELEVANT ones)
     and the method."""
-    tables = {k: v for k, v in raw.items() if k not in IRRELEVANT}
+    tables = _numbers_as_floats({k: v for k, v in raw.items() if k not in IRRELEVANT})
     text = json.dumps([tables, method], sort_keys=True, default=repr)
     return hashlib.sha256(text.encode()).hexdigest()
+
+
+def _numbers_as_floats(v: Any) -> Any:
+    """``u0 = 0`` and ``u0 = 0.0`` are the same scenario."""
+    if isinstance(v, Mapping):
+        return {k: _numbers_as_floats(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_numbers_as_floats(x) for x in v]
+    return float(v) if isinstance(v, int) and not isinstance(v, bool) else v
 
 
 @dataclass(frozen=True)

@@ -83,7 +83,10 @@ def test_a_resume_point_of_another_scenario_or_none_is_refused(tmp_path: Path) -
         run_scenario(sc, method="centralized", stop=2.0, output=out, inprocess=True, progress=False, resume=True)
     with pytest.raises(OutputError, match="exists: continue that run with --resume"):
         run_scenario(sc, stop=2.0, output=out, inprocess=True, progress=False, overwrite=False)
-    report = run_scenario(sc, stop=3.0, output=out, inprocess=True, progress=False, resume=True)  # and further
+    same = parse({**sc.raw, "subsims": {**sc.raw["subsims"], "mass2": {  # u0 = 0 for 0.0: the same scenario
+        **sc.raw["subsims"]["mass2"], "params": {**sc.raw["subsims"]["mass2"]["params"], "u0": 0}}}}, sc.path)
+    assert sc.raw["subsims"]["mass2"]["params"]["u0"] == 0.0
+    report = run_scenario(same, stop=3.0, output=out, inprocess=True, progress=False, resume=True)  # and further
     assert report.summary.t_end == 3.0 and read_results(out)[1][-1, 0] == 3.0
 
 

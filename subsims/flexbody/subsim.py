@@ -153,6 +153,8 @@ def _ports(setup: FlexSetup) -> tuple[dict[str, Port], dict[str, Port]]:
     return inputs, outputs
 
 
+MAX_STEPS = 100_000  # RK4 steps one run_interval may take (about a minute and 50 MB)
+
 class FlexBody(Subsim):
     """Flexible spacecraft of Storch & Gates (CSDL-R-1582): rigid base + particle appendage, t modes.
 
@@ -192,6 +194,10 @@ class FlexBody(Subsim):
         self, state: np.ndarray, times: np.ndarray, u: InputFunction
     ) -> tuple[Mapping[str, np.ndarray], np.ndarray]:
         times = np.asarray(times, dtype=np.float64)
+        steps = (times[-1] - times[0]) / self.setup.h
+        if steps > MAX_STEPS:  # one short request must not keep the process busy for minutes or ask for gigabytes
+            raise ModelError(f"flexbody: the interval [{times[0]!r}, {times[-1]!r}] needs {steps:.0f} RK4 steps of "
+                             f"h = {self.setup.h:g} s; at most {MAX_STEPS} in one request: use shorter intervals")
         y0 = np.array(state, dtype=np.float64)
         advance = self._advance_free if self.setup.mode == "free" else self._advance_appendage
         try:

@@ -86,6 +86,13 @@ def test_sample_zero_is_the_start_state():
     np.testing.assert_allclose(np.degrees(out["euler123"][0]), [5, 20, 0], atol=1e-12)
 
 
+def test_an_interval_too_long_for_one_request_is_refused_at_once():
+    """A 200-byte request asking for 1000 s at h = 0.01 kept the subsim busy for 52 s; 1e5 s asked for 5 GiB."""
+    fb, y0 = configured({})
+    with pytest.raises(ModelError, match=r"needs \d+ RK4 steps of h = .*; at most 100000 in one request"):
+        fb.advance(y0, np.array([0.0, 1e5]), smooth_inputs(fb.inputs))
+
+
 def test_blow_up_is_a_model_error():
     fb, y0 = configured({})
     with pytest.raises(ModelError):
