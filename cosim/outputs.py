@@ -267,14 +267,18 @@ def stream_header(columns: list[str], units: list[str]) -> bytes:
     return STREAM_MAGIC + json.dumps({"columns": columns, "units": units}).encode() + b"\n"
 
 
-def read_stream(path: Path) -> tuple[list[str], list[str], np.ndarray]:
-    """Columns, units and the whole rows of a ``.partial`` stream (a torn last row is left out)."""
+def stream_head(path: Path) -> tuple[list[str], list[str], int]:
+    """Columns and units of a ``.partial`` stream, and the byte offset of its first row."""
     with path.open("rb") as f:
         if f.read(len(STREAM_MAGIC)) != STREAM_MAGIC:
             raise ValueError(f"{path} is not a cosim sample stream")
         head = json.loads(f.readline())
-        offset = f.tell()
-    columns, units = list(head["columns"]), list(head["units"])
+        return list(head["columns"]), list(head["units"]), f.tell()
+
+
+def read_stream(path: Path) -> tuple[list[str], list[str], np.ndarray]:
+    """Columns, units and the whole rows of a ``.partial`` stream (a torn last row is left out)."""
+    columns, units, offset = stream_head(path)
     n = (path.stat().st_size - offset) // (8 * len(columns))
     data = np.fromfile(path, dtype="<f8", count=n * len(columns), offset=offset).reshape(n, len(columns))
     return columns, units, data

@@ -40,6 +40,8 @@ from cosim.outputs import (
     meta_path,
     read_stream,
     reserve_output,
+    run_files,
+    stream_head,
     stream_header,
     stream_path,
     write_npz,
@@ -140,16 +142,13 @@ class ResultWriter:
                     stream.close(sync=True)
             if self._npz:
                 columns, _, rows = read_stream(data)
-                with data.open("rb") as f:  # the magic line and the JSON line before the rows
-                    f.readline()
-                    f.readline()
-                    head = f.tell()
+                row_ends = stream_head(data)[2] + 8 * len(columns) * np.arange(1, rows.shape[0] + 1)
             else:
-                columns, rows, head = _csv_rows(data)
+                columns, rows, row_ends = _csv_rows(data)
             if columns != self.columns:
                 raise OutputError(f"{data} has other columns than this run writes: not this run's results")
             kept = _rows_to(rows[:, 0], t, data)
-            keep = head + kept * len(columns) * 8 if self._npz else int(_csv_row_ends(data, head)[kept - 1])
+            keep = int(row_ends[kept - 1])
             diag_rows = _diag_rows_to(diag_path(self.path), t)
             self._data = AppendFile(data, "the NPZ's streamed samples" if self._npz else "results", keep=keep)
             self._diag = AppendFile(diag_path(self.path), "diagnostics", keep=diag_rows[1])
@@ -233,7 +232,7 @@ class ResultWriter:
             try:
                 self._close_files()
                 if failed_run and self._count == 0 and not self._resumed:
-                    for path in (self.path, stream_path(self.path), diag_path(self.path), meta_path(self.path)):
+                    for path in run_files(self.path):
                         path.unlink(missing_ok=True)
                     return
                 if self._npz and not self.failed:
@@ -347,25 +346,16 @@ def recover(path: Path) -> str:
         lock.release()
 
 
-def _csv_rows(path: Path) -> tuple[list[str], np.ndarray, int]:
-    """Columns, rows and the header's length in bytes of a CSV result file (a torn last row left out)."""
+def _csv_rows(path: Path) -> tuple[list[str], np.ndarray, np.ndarray]:
+    """Columns and rows of a CSV result file (a torn last row left out), and the byte offset just past each row."""
     if not _has_header(path, "time"):
         raise OutputError(f"{path}: not a cosim result file to resume (no header starting with 'time,')")
-    with path.open("rb") as f:
-        head = len(f.readline(1 << 24))
-    with path.open() as f:
-        columns = next(csv.reader(f))
-    raw = path.read_bytes()
-    body = raw[head:raw.rfind(b"\n") + 1]
-    rows = np.loadtxt(io.BytesIO(body), delimiter=",", ndmin=2) if body else np.empty((0, len(columns)))
-    return columns, rows, head
-
-
-def _csv_row_ends(path: Path, head: int) -> np.ndarray:
-    """The byte offset just past each row of a CSV result file."""
     raw = path.read_bytes()
     ends = np.flatnonzero(np.frombuffer(raw, dtype=np.uint8) == ord("\n")) + 1
-    return ends[ends > head]
+    columns = next(csv.reader([raw[:ends[0]].decode()]))
+    body = raw[ends[0]:ends[-1]]
+    rows = np.loadtxt(io.BytesIO(body), delimiter=",", ndmin=2) if body else np.empty((0, len(columns)))
+    return columns, rows, ends[1:]
 
 
 def _rows_to(times: np.ndarray, t: float, path: Path) -> int:
