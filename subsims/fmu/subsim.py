@@ -290,17 +290,20 @@ class FmuSubsim(Subsim):
         n = self.info.n_states
         t1 = float(times[-1])
 
-        def rhs(t: float, x: np.ndarray) -> np.ndarray:
+        def at(t: float, x: np.ndarray) -> None:  # the FMU at time t, in state x, with the inputs there
             inst.set_time(t)
             inst.set_reals(self._in_ports, self._input_matrix(u, np.array([t]))[0])
             inst.set_states(x)
+
+        def rhs(t: float, x: np.ndarray) -> np.ndarray:
+            at(t, x)
             return inst.get_derivatives(n)
 
         if n == 0:  # no continuous states: outputs are functions of time and inputs
             states = np.zeros((0, times.size))
         else:
             try:
-                states = self._integrate(inst, rhs, inst.get_states(n), times, u)
+                states = self._integrate(inst, rhs, at, inst.get_states(n), times)
             except (FmiCallError, ModelError):
                 raise
             except Exception as exc:  # an FMI call inside the right-hand side failed
@@ -318,7 +321,7 @@ class FmuSubsim(Subsim):
                              "(use interface = 'cs')")
         return out
 
-    def _integrate(self, inst: Instance, rhs: Any, x0: np.ndarray, times: np.ndarray, u: InputFunction) -> np.ndarray:
+    def _integrate(self, inst: Instance, rhs: Any, at: Any, x0: np.ndarray, times: np.ndarray) -> np.ndarray:
         """The states at ``times`` (n x samples), as ``solve_ivp(..., t_eval=times)`` gives them (the same steps and
         dense output), and after every accepted step fmiCompletedIntegratorStep, at that step's end, as FMI asks:
         an FMU that wants event mode then is refused there, not at the interval's end."""
@@ -333,9 +336,7 @@ class FmuSubsim(Subsim):
             if upto > k:
                 columns.append(solver.dense_output()(times[k:upto]))
                 k = upto
-            inst.set_time(solver.t)
-            inst.set_reals(self._in_ports, self._input_matrix(u, np.array([solver.t]))[0])
-            inst.set_states(solver.y)
+            at(solver.t, solver.y)
             if inst.completed_step():
                 raise ModelError(f"the FMU asks for event handling at t={float(solver.t)!r} (a step event); model "
                                  "exchange events are not supported (use interface = 'cs')")
