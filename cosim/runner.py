@@ -32,10 +32,6 @@ from cosim.scenario import Scenario, ScenarioError
 Log = Callable[[str], None]
 
 
-def _stderr(msg: str) -> None:
-    say(msg)
-
-
 @dataclass
 class RunReport:
     method: str
@@ -58,7 +54,7 @@ class Session:
     plans: dict[str, Plan] = field(default_factory=dict)  # per method, checked once
     external_wait: float = 300.0
     timeout: float = 120.0
-    log: Log = _stderr
+    log: Log = say
 
     def revive(self, name: str) -> SubsimHandle:
         """A new process for a subsim that died or hung, configured as at the run's start: a launched one is
@@ -87,7 +83,7 @@ def open_session(
     inprocess: bool = False,
     listen: str | None = None,
     external_wait: float = 300.0,
-    log: Log = _stderr,
+    log: Log = say,
     timeout: float = 120.0,
     security: Security | None = None,
     run_id: str | None = None,
@@ -242,7 +238,7 @@ def run_scenario(
     inprocess: bool = False,
     listen: str | None = None,
     progress: bool = True,
-    log: Log = _stderr,
+    log: Log = say,
     on_interval: Callable[[Interval], None] | None = None,
     overwrite: bool = True,
     restarts: int | None = None,
