@@ -147,9 +147,10 @@ def open_session(
     return session
 
 
-def _resume_point(scenario: Scenario, method: str, output: Path, stop: float) -> Saved:
+def _resume_point(scenario: Scenario, method: str, key: str, output: Path, stop: float) -> Saved:
+    """The resume point beside ``output``, if it is one of this scenario (``key``: its fingerprint) and method."""
     saved = load_resume(resume_path(output))
-    if saved.fingerprint != fingerprint(scenario.raw, method) or saved.t_start != scenario.start:
+    if saved.fingerprint != key or saved.t_start != scenario.start:
         raise OutputError(f"{resume_path(output)} is a resume point of another scenario or method than "
                           f"{scenario.path} --method {method} (they must be the same but for stop): run it from the "
                           "start with --overwrite")
@@ -256,8 +257,9 @@ def run_scenario(
     stop = scenario.stop if stop is None else stop
     output = Path(output) if output is not None else default_output(scenario, method)
     lock = reserve_output(output, overwrite or resume)  # locked and checked before anything is launched
+    key = fingerprint(scenario.raw, method)  # what a resume point of this run is saved under
     try:
-        saved = _resume_point(scenario, method, output, stop) if resume else None
+        saved = _resume_point(scenario, method, key, output, stop) if resume else None
         if saved is None:
             resume_path(output).unlink(missing_ok=True)  # an older run's: not this one's
         session = open_session(scenario, inprocess=inprocess, listen=listen, log=log, security=security,
@@ -275,7 +277,6 @@ def run_scenario(
             recovery = Recovery(session.revive, restarts, spec.checkpoint_every, log)
         deadline = Deadline(fixed=timeout if timeout is not None else spec.timeout)
         checkpoints: list[Saved] = []  # taken, their intervals not yet written
-        key = fingerprint(scenario.raw, method)
         coordinator = Coordinator(session.handles, session.plans[method], settings, recovery=recovery,
                                   deadline=deadline, checkpoint_every=spec.checkpoint_every,
                                   on_checkpoint=lambda point, states: checkpoints.append(
