@@ -99,6 +99,9 @@ def run(
     run_id: str | None = None,
     attach_wait: float = 300.0,
     progress: bool = False,
+    restarts: int | None = None,
+    timeout: float | None = None,
+    resume: bool = False,
 ) -> Result:
     """Run a scenario as ``cosim run`` does and return its time series.
 
@@ -106,13 +109,18 @@ def run(
     ``"distributed"`` or ``"unified"`` (default: the scenario's). ``stop``: overrides the scenario's.
     ``params``: ``{subsim: {parameter: value}}`` merged over the scenario's (a variant without a new
     file). ``output``: also write the result file (.csv or .npz) and its diagnostics. The other
-    arguments are those of ``cosim run``. Raises ``ScenarioError``, ``SubsimError``, ``NotConverged``,
-    ``TransformError``.
+    arguments are those of ``cosim run``. ``resume``: go on with the interrupted run that wrote ``output``
+    (required then) from its latest resume point; the result is then the whole run, read back from its
+    file. Raises ``ScenarioError``, ``SubsimError``, ``NotConverged``, ``TransformError``, ``OutputError``.
     """
     sc = scenario if isinstance(scenario, Scenario) else load(scenario)
     if params:
         sc = _with_params(sc, params)
     method = method or sc.default_method
+    if resume and output is None:
+        raise ScenarioError("resume=True goes on with the results of an interrupted run: give its output= file")
+    if resume and method == "unified":
+        raise ScenarioError("resume=True continues coupled runs (centralized, distributed), not unified ones")
     with tempfile.TemporaryDirectory(prefix="cosim-run-") as scratch:
         path = Path(output) if output is not None else Path(scratch) / "results.csv"
         if method == "unified":
@@ -120,7 +128,10 @@ def run(
             return _from_file(sc, report, output)
         collect = _Collect()
         report = run_scenario(sc, method=method, stop=stop, output=path, inprocess=inprocess, listen=listen,
-                              progress=progress, on_interval=collect, run_id=run_id, attach_wait=attach_wait)
+                              progress=progress, on_interval=None if resume else collect, run_id=run_id,
+                              attach_wait=attach_wait, restarts=restarts, timeout=timeout, resume=resume)
+        if resume:  # the intervals before the resume point are in the file only
+            return _from_file(sc, report, output)
     t, signals, diag = collect.arrays()
     return Result(sc, report.method, t, signals, diag, report.summary, report.order, report.feedback,
                   Path(output) if output is not None else None)
@@ -136,12 +147,12 @@ def _with_params(sc: Scenario, params: Mapping[str, Mapping[str, Any]]) -> Scena
 
 
 def _from_file(sc: Scenario, report: Any, output: str | Path | None) -> Result:
-    """A unified run writes its file; read it back (CSV floats are written with repr: exact)."""
+    """A unified or resumed run's file, read back (CSV floats are written with repr: exact)."""
     columns, data = read_results(report.output)
     signals: dict[str, list[np.ndarray]] = {}
     for i, name in enumerate(columns[1:], start=1):
         signals.setdefault(name.rpartition("[")[0], []).append(data[:, i])
     _, diag_rows = read_results(report.diagnostics)
     diag = {c: diag_rows[:, j] for j, c in enumerate(DIAG_COLUMNS)}
-    return Result(sc, "unified", data[:, 0], {k: np.column_stack(v) for k, v in signals.items()}, diag,
+    return Result(sc, report.method, data[:, 0], {k: np.column_stack(v) for k, v in signals.items()}, diag,
                   report.summary, report.order, report.feedback, Path(output) if output is not None else None)

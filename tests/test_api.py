@@ -67,3 +67,36 @@ def test_params_override_the_scenario_for_one_run(tmp_path: Path) -> None:
         cosim.run(OSCILLATOR, stop=0.1, inprocess=True, params={"mass3": {"u0": 0.5}})
     with pytest.raises(ScenarioError, match="did you mean 'u0'"):
         cosim.run(OSCILLATOR, stop=0.1, inprocess=True, params={"mass2": {"u_0": 0.5}})
+
+
+def test_resume_goes_on_with_an_interrupted_run_and_returns_the_whole_run(tmp_path: Path) -> None:
+    from cosim.runner import run_scenario
+    from cosim.scenario import load, parse
+
+    sc = load(OSCILLATOR)
+    sc = parse({**sc.raw, "run": {**sc.raw.get("run", {}), "checkpoint_every": 10}}, sc.path)
+    whole = cosim.run(sc, method="distributed", stop=3.0, inprocess=True)
+
+    class Stop(Exception):
+        pass
+
+    seen = [0]
+
+    def stop_at_47(_interval: object) -> None:
+        seen[0] += 1
+        if seen[0] == 47:
+            raise Stop
+
+    out = tmp_path / "part.csv"
+    with pytest.raises(Stop):
+        run_scenario(sc, method="distributed", stop=3.0, output=out, inprocess=True, progress=False,
+                     on_interval=stop_at_47)
+    with pytest.raises(ScenarioError, match="output="):
+        cosim.run(sc, method="distributed", stop=3.0, inprocess=True, resume=True)
+    r = cosim.run(sc, method="distributed", stop=3.0, output=out, inprocess=True, resume=True)
+    assert r.summary.intervals == 20  # from the resume point at interval 40 of 60, not from t = 0
+    assert r.method == "distributed" and r.output == out
+    assert same_bits(r.t, whole.t) and set(r.signals) == set(whole.signals)
+    for name, values in whole.signals.items():
+        assert same_bits(r[name], values), name
+    assert same_bits(r.diagnostics["t1"], whole.diagnostics["t1"])
