@@ -134,7 +134,12 @@ def _describe(args: argparse.Namespace) -> int:
     scenario = load(args.scenario)
     print(f"{scenario.name}: {scenario.description}".rstrip(": "))
     print(f"time: {scenario.start:g} to {scenario.stop:g}")
-    session = open_session(scenario, inprocess=not args.launch, log=lambda m: print(m, file=sys.stderr))
+    if args.listen is not None:
+        if not args.launch:
+            raise UsageError("--listen is where the router of --launch listens: give --launch too")
+        check_listen(args.listen)
+    session = open_session(scenario, inprocess=not args.launch, listen=args.listen,
+                           log=lambda m: print(m, file=sys.stderr))
     try:
         print("subsims:")
         for name, d in session.descriptions.items():
@@ -233,6 +238,8 @@ def build_parser() -> argparse.ArgumentParser:
     d = sub.add_parser("describe", help="print subsims, couplings, execution order and feedback edges")
     d.add_argument("scenario", type=Path)
     d.add_argument("--launch", action="store_true", help="ask real processes (default: in-process models)")
+    d.add_argument("--listen", metavar="ENDPOINT",
+                   help="with --launch: router endpoint (needed by subsims with a launcher, as for cosim run)")
     d.set_defaults(fn=_describe)
 
     s = sub.add_parser("serve", help="serve a subsim class as a process (see python -m cosim.serve)")

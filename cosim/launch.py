@@ -1,4 +1,4 @@
-"""Start subsim processes on this machine and stop them reliably.
+"""Start subsim processes, on this machine or through a launcher on another, and stop them reliably.
 
 Used by ``cosim run`` and by the pytest fixtures in :mod:`cosim.testing`.
 """
@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import fcntl
 import os
+import shlex
 import shutil
 import subprocess
 import sys
@@ -57,6 +58,41 @@ def subsim_command(
     return [*head, "--connect", endpoint, "--run", run, "--name", name, *tls, *lease_arg]
 
 
+@dataclass(frozen=True)
+class Elsewhere:
+    """How to start a subsim on another machine: ``launcher`` (e.g. ``("ssh", "lab-2")``) followed by one shell
+    line that goes to ``workdir``, reads the subsim's two secrets from standard input (arguments would show in
+    ``ps`` there) and runs ``python``'s subsim process, connecting to ``connect`` (None: the bus's endpoint)."""
+
+    launcher: tuple[str, ...]
+    workdir: str | None = None
+    python: str = "python3"
+    connect: str | None = None
+
+
+UNSPECIFIED_HOSTS = ("0.0.0.0", "[::]", "::")
+
+
+def endpoint_for(elsewhere: Elsewhere, listen: str, endpoint: str) -> str:
+    """The endpoint a subsim started elsewhere connects to: its ``connect``, else ``endpoint``, where the router
+    listening on ``listen`` is reached; ValueError if ``listen`` names no address that machine could be given (an
+    unspecified host, a Unix socket)."""
+    if elsewhere.connect is not None:
+        return elsewhere.connect
+    proto, _, address = listen.partition("/")
+    if proto not in ("tcp", "tls", "quic", "udp") or address.rsplit(":", 1)[0] in UNSPECIFIED_HOSTS:
+        raise ValueError(f"the coordinator listens on {listen}, an address another machine cannot be told: listen "
+                         "on an address of this machine it reaches (--listen tcp/<address>:<port>), or set connect")
+    return endpoint
+
+
+def launcher_line(argv: Sequence[str], workdir: str | None) -> str:
+    """The shell line a launcher runs: the two secrets come on standard input, one a line."""
+    cd = f"cd {shlex.quote(workdir)} && " if workdir else ""
+    return (f"{cd}IFS= read -r {SECRET_ENV} && IFS= read -r {ZENOH_AUTH_ENV} && "
+            f"export {SECRET_ENV} {ZENOH_AUTH_ENV} PYTHONUNBUFFERED=1 && exec {shlex.join(argv)}")
+
+
 def terminate(popen: subprocess.Popen, grace: float = 3.0) -> int:
     """SIGTERM, then SIGKILL if the process is still there after ``grace`` seconds; always reaps it. Its exit code."""
     if popen.poll() is None:
@@ -78,6 +114,7 @@ class SubsimProcess:
     module: str = ""
     model: str | None = None
     lease: float | None = None
+    elsewhere: Elsewhere | None = None  # started through a launcher: popen is the launcher
 
     def stop(self, grace: float = 3.0) -> int:
         """Ask for ``shutdown``, then SIGTERM, then SIGKILL; always reaps the process. One known to be hung
@@ -148,7 +185,8 @@ class Bus:
     attached: list[str] = field(default_factory=list)  # names of external subsims: sent shutdown on close
     private_dir: str | None = None  # the 0700 directory of a PRIVATE endpoint's socket, removed on close
     names: tuple[str, ...] | None = None  # the subsims this run may have, each with its own login (None: shared)
-    _spawned_as: dict[str, tuple[str, str | None, float | None]] = field(default_factory=dict, repr=False)
+    _spawned_as: dict[str, tuple[str, str | None, float | None, Elsewhere | None]] = field(default_factory=dict,
+                                                                                         repr=False)
 
     @classmethod
     def open(cls, listen: str = "tcp/127.0.0.1:0", run: str | None = None, security: Security | None = None,
@@ -202,12 +240,17 @@ class Bus:
             raise ValueError(f"subsim {name!r} is not one of this run's subsims ({', '.join(self.names)}): the bus "
                              "gives logins only to the names it opened with")
 
-    def command(self, module: str, name: str, model: str | None = None, lease: float | None = None) -> list[str]:
-        """The command line of a subsim of this run (under mutual TLS, local ones show the router's certificate)."""
+    def command(self, module: str, name: str, model: str | None = None, lease: float | None = None,
+                elsewhere: Elsewhere | None = None) -> list[str]:
+        """The command line of a subsim of this run (under mutual TLS, local ones show the router's certificate;
+        one started ``elsewhere`` is given the same TLS file paths, which must hold the same files there)."""
         sec = self.security
         client = (sec.tls_cert, sec.tls_key) if sec.mutual and sec.tls_cert and sec.tls_key else None
-        return subsim_command(module, self.endpoint, self.run, name, model, tls_ca=sec.tls_ca, tls_client=client,
-                              lease=lease)
+        if elsewhere is None:
+            return subsim_command(module, self.endpoint, self.run, name, model, tls_ca=sec.tls_ca, tls_client=client,
+                                  lease=lease)
+        return subsim_command(module, elsewhere.connect or self.endpoint, self.run, name, model,
+                              python=elsewhere.python, tls_ca=sec.tls_ca, tls_client=client, lease=lease)
 
     def attach(self, name: str, timeout: float = 60.0, wait: float = 10.0) -> RemoteHandle:
         """Handle to a subsim that is (or soon will be) serving ``name`` in this run."""
@@ -230,30 +273,45 @@ class Bus:
         quiet: bool = False,
         model: str | None = None,
         lease: float | None = None,
+        elsewhere: Elsewhere | None = None,
     ) -> SubsimProcess:
-        """Start ``python -m module`` (or ``cosim.serve model``) as subsim ``name``; wait until it answers."""
-        env = {**os.environ, **self.subsim_env(name)}
-        env.setdefault("PYTHONUNBUFFERED", "1")
-        self._spawned_as[name] = (module, model, lease)  # for respawn, even if this start fails
-        if SEARCH_PATH:  # the scenario's directory and the working directory (cosim.importing)
-            env["PYTHONPATH"] = os.pathsep.join([*filter(None, [env.get("PYTHONPATH")]), *SEARCH_PATH])
+        """Start ``python -m module`` (or ``cosim.serve model``) as subsim ``name``, here or ``elsewhere`` through
+        its launcher; wait until it answers."""
+        secrets = self.subsim_env(name)
+        self._spawned_as[name] = (module, model, lease, elsewhere)  # for respawn, even if this start fails
+        argv = [*self.command(module, name, model, lease=lease, elsewhere=elsewhere), "--quiet-stop"]
+        if elsewhere is None:
+            env = {**os.environ, **secrets}
+            env.setdefault("PYTHONUNBUFFERED", "1")
+            if SEARCH_PATH:  # the scenario's directory and the working directory (cosim.importing)
+                env["PYTHONPATH"] = os.pathsep.join([*filter(None, [env.get("PYTHONPATH")]), *SEARCH_PATH])
+        else:  # the launcher gets neither the secrets (they go on its standard input) nor this machine's paths
+            env, argv = dict(os.environ), [*elsewhere.launcher, launcher_line(argv, elsewhere.workdir)]
         try:
             popen = subprocess.Popen(
-                [*self.command(module, name, model, lease=lease), "--quiet-stop"],
+                argv,
                 env=env,
+                stdin=None if elsewhere is None else subprocess.PIPE,
                 stdout=subprocess.DEVNULL if quiet else None,
                 stderr=subprocess.DEVNULL if quiet else None,
                 # its own process group: a Ctrl-C at the terminal reaches the coordinator only, which stops its
                 # subsims in order (they would otherwise each print their own stop line)
                 process_group=0,
             )
-        except OSError as exc:  # e.g. out of file descriptors or processes
-            raise SubsimError("no_responder", f"cannot start its process: {exc}", name, "spawn") from None
+        except OSError as exc:  # e.g. out of file descriptors or processes, or no such launcher
+            how = "its process" if elsewhere is None else f"its launcher {shlex.join(elsewhere.launcher)!r}"
+            raise SubsimError("no_responder", f"cannot start {how}: {exc}", name, "spawn") from None
+        if popen.stdin is not None:
+            try:
+                popen.stdin.write(f"{secrets[SECRET_ENV]}\n{secrets[ZENOH_AUTH_ENV]}\n".encode())
+                popen.stdin.close()
+            except OSError:  # the launcher is gone already: its exit is reported below
+                pass
         handle = RemoteHandle(self.session, self.run, name, timeout=timeout, key=self.key(name))
-        proc = SubsimProcess(name, popen, handle, module, model, lease)
+        proc = SubsimProcess(name, popen, handle, module, model, lease, elsewhere)
         self.processes.append(proc)
         try:
-            _wait_ready_or_exit(handle, popen, wait)
+            _wait_ready_or_exit(handle, popen, wait, elsewhere)
         except BaseException:
             proc.stop(grace=1.0)
             raise
@@ -269,8 +327,9 @@ class Bus:
             old.popen.wait()
             old.handle.close()
             self.processes.remove(old)
-        module, model, lease = self._spawned_as[name]
-        return self.spawn(module, name, model=model, lease=lease, **spawn_args)  # type: ignore[arg-type]
+        module, model, lease, elsewhere = self._spawned_as[name]
+        return self.spawn(module, name, model=model, lease=lease, elsewhere=elsewhere,
+                          **spawn_args)  # type: ignore[arg-type]
 
     def close(self) -> None:
         """Send ``shutdown`` to attached subsims, stop every spawned process, undeclare the coordinator's
@@ -300,11 +359,13 @@ class Bus:
         self.close()
 
 
-def _wait_ready_or_exit(handle: RemoteHandle, popen: subprocess.Popen, wait: float) -> None:
+def _wait_ready_or_exit(handle: RemoteHandle, popen: subprocess.Popen, wait: float,
+                        elsewhere: Elsewhere | None = None) -> None:
     deadline = time.monotonic() + wait
     while time.monotonic() < deadline:
         if popen.poll() is not None:
-            raise SubsimError("no_responder", f"process exited with code {popen.returncode}", handle.name, "spawn")
+            what = "process" if elsewhere is None else f"launcher {shlex.join(elsewhere.launcher)!r}"
+            raise SubsimError("no_responder", f"{what} exited with code {popen.returncode}", handle.name, "spawn")
         if handle.wait_alive(0.05):
             handle.wait_ready(max(deadline - time.monotonic(), 0.1))
             return

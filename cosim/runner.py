@@ -19,7 +19,7 @@ from cosim.coupler.plan import Plan
 from cosim.coupler.relaxation import Interval, RunSummary
 from cosim.driver import Coordinator, Deadline, Recovery, plan_for
 from cosim.handles import Description, InProcessHandle, SubsimHandle
-from cosim.launch import PRIVATE, Bus
+from cosim.launch import PRIVATE, Bus, Elsewhere, endpoint_for
 from cosim.outputs import OutputError, reserve_output, resume_path
 from cosim.progress import Progress
 from cosim.protocol.security import Security
@@ -27,7 +27,7 @@ from cosim.results import ResultWriter, diag_path, output_units
 from cosim.resume import Saved, fingerprint
 from cosim.resume import load as load_resume
 from cosim.resume import save as save_resume
-from cosim.scenario import Scenario, ScenarioError
+from cosim.scenario import Scenario, ScenarioError, SubsimSpec
 
 Log = Callable[[str], None]
 
@@ -96,19 +96,31 @@ def open_session(
     "env": {...}}``. ``run_id`` fixes the run id (default: a fresh one) so that a launcher knows it in advance."""
     handles: dict[str, SubsimHandle] = {}
     bus = None
+    away: dict[str, Elsewhere] = {}  # the subsims started on other machines, each with the endpoint it is given
     if inprocess:
         for name, spec in scenario.subsims.items():
-            if spec.external or spec.model is None:
-                raise ScenarioError(f"{scenario.path}: [subsims.{name}] is external: it cannot run in this "
+            if spec.external or spec.model is None or spec.launcher:
+                where = "started on another machine (launcher)" if spec.launcher else "external"
+                raise ScenarioError(f"{scenario.path}: [subsims.{name}] is {where}: it cannot run in this "
                                     "process (cosim run without --inprocess; cosim describe --launch)")
             handles[name] = InProcessHandle(spec.model_class()(), name)
     else:
+        away = {name: how for name, spec in scenario.subsims.items() if (how := elsewhere(spec)) is not None}
+        if away and listen is None:
+            raise ScenarioError(f"{scenario.path}: [subsims.{next(iter(away))}] is started on another machine "
+                                "(launcher): give --listen tcp/<an address of this machine it reaches>:<port>")
         try:
             security = security or scenario.security
             bus = Bus.open(listen or default_listen(scenario, security), run=run_id, security=security,
                            names=list(scenario.subsims))
         except (ValueError, RuntimeError) as exc:  # bad --listen or security files; port taken
             raise ScenarioError(f"cannot open the bus: {exc}") from None
+        for name, how in away.items():  # each told the endpoint its machine reaches
+            try:
+                away[name] = replace(how, connect=endpoint_for(how, str(listen), bus.endpoint))
+            except ValueError as exc:
+                bus.close()
+                raise ScenarioError(f"{scenario.path}: [subsims.{name}] {exc}") from None
     session = Session(scenario, handles, {}, bus, external_wait=external_wait, timeout=timeout, log=log)
     try:
         if bus is not None:
@@ -126,7 +138,8 @@ def open_session(
                         f"machine's address)")
                     handles[name] = bus.attach(name, timeout=timeout, wait=external_wait)
                 else:
-                    process = bus.spawn("", name, timeout=timeout, model=spec.model, lease=scenario.run.lease)
+                    process = bus.spawn("", name, timeout=timeout, model=spec.model, lease=scenario.run.lease,
+                                        elsewhere=away.get(name))
                     handles[name] = process.handle
         for name, spec in scenario.subsims.items():
             try:
@@ -145,6 +158,13 @@ def open_session(
         session.close()
         raise
     return session
+
+
+def elsewhere(spec: SubsimSpec) -> Elsewhere | None:
+    """How ``spec``'s subsim is started on another machine, or None (here)."""
+    if not spec.launcher:
+        return None
+    return Elsewhere(spec.launcher, spec.workdir, spec.python, spec.connect)
 
 
 def _resume_point(scenario: Scenario, method: str, key: str, output: Path, stop: float) -> Saved:

@@ -60,6 +60,15 @@ KEYS: dict[str, dict[str, Key]] = {
         "doc": Key("string", '""', "", "free text"),
         "fmu": Key("string", "none", "", "an FMU file instead of model (relative to the scenario file; needs the fmi "
                    "extra): stands for model = 'subsims.fmu:FmuSubsim' with params.fmu = the path (docs/fmi.md)"),
+        "launcher": Key("list of strings", "none", "",
+                        "run this subsim on another machine: cosim run starts it (and restarts it) with this command "
+                        "followed by one shell line, e.g. ['ssh', 'lab-2']; needs --listen on an address that "
+                        "machine reaches (docs/scenarios.md, Subsims on other machines)"),
+        "workdir": Key("string", "none", "",
+                       "with launcher: the directory there to run in (its models import from it)"),
+        "python": Key("string", '"python3"', "", "with launcher: the Python there, with cosim installed"),
+        "connect": Key("string", "the --listen endpoint", "",
+                       "with launcher: the coordinator's endpoint as that machine reaches it"),
     },
     "couplings[]": {
         "to": Key("string", "required", "", "the input driven, 'subsim.port'"),
@@ -148,6 +157,10 @@ class SubsimSpec:
     external: bool
     params: Mapping[str, Any]
     inputs: Mapping[str, tuple[float, ...]] = field(default_factory=dict)  # held constant: port -> values
+    launcher: tuple[str, ...] = ()  # started elsewhere by this command and one shell line (empty: here)
+    workdir: str | None = None  # with launcher: where it runs there
+    python: str = "python3"  # with launcher: the Python there
+    connect: str | None = None  # with launcher: the coordinator's endpoint as seen from there (None: the listen one)
 
     def model_class(self) -> type[Subsim]:
         return load_model(self.model or "")
@@ -332,7 +345,8 @@ class _Parser:
         model = spec.get("model")
         if model is None and not external:
             raise self.fail(key, "needs model = 'package.module:Class' (or external = true)")
-        if model is not None:
+        elsewhere = self.launcher(spec, key, external)
+        if model is not None and not elsewhere:  # one started elsewhere imports it there, not here
             try:
                 load_model(model)
             except ValueError as exc:
@@ -344,7 +358,32 @@ class _Parser:
             if not values or any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in values):
                 raise self.fail(f"{key}.inputs.{port}", f"must be a number or a list of numbers, got {value!r}")
             inputs[port] = tuple(float(v) for v in values)
-        return SubsimSpec(name, model, external, MappingProxyType(dict(params)), MappingProxyType(inputs))
+        return SubsimSpec(name, model, external, MappingProxyType(dict(params)), MappingProxyType(inputs),
+                          **elsewhere)
+
+    def launcher(self, spec: Mapping[str, Any], key: str, external: bool) -> dict[str, Any]:
+        """The launcher keys of a subsim started on another machine, as SubsimSpec fields ({} if none)."""
+        given = [k for k in ("launcher", "workdir", "python", "connect") if k in spec]
+        if not given:
+            return {}
+        if "launcher" not in spec:
+            raise self.fail(f"{key}.{given[0]}", "applies to a subsim started elsewhere: add launcher = [...] "
+                            "(e.g. ['ssh', 'host'])")
+        launcher = spec["launcher"]
+        if not isinstance(launcher, list) or not launcher or not all(isinstance(w, str) and w for w in launcher):
+            raise self.fail(f"{key}.launcher", f"must be a non-empty list of strings, e.g. ['ssh', 'lab-2'], got "
+                            f"{launcher!r}")
+        if external:
+            raise self.fail(key, "give launcher (cosim starts it elsewhere) or external = true (you start it), "
+                            "not both")
+        fields: dict[str, Any] = {"launcher": tuple(launcher)}
+        for name in ("workdir", "python", "connect"):
+            if name in spec:
+                value = spec[name]
+                if not isinstance(value, str) or not value:
+                    raise self.fail(f"{key}.{name}", f"must be a non-empty string, got {value!r}")
+                fields[name] = value
+        return fields
 
     def coupling(self, i: int, c: Mapping[str, Any], subsims: Mapping[str, SubsimSpec]) -> Coupling:
         key = f"couplings[{i}]"

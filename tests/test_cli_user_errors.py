@@ -157,6 +157,7 @@ def test_a_misspelled_option_shows_the_usage_of_its_own_command(tmp_path: Path, 
     (["describe", "."], "is a directory: give a scenario file (.toml) in it"),
     (["run", "binary.toml"], "binary.toml: not a text file, so not a scenario (TOML)"),
     (["run", str(OSCILLATOR), "--listen", "garbage"], "cannot listen on garbage: Endpoints must be of the form"),
+    (["describe", str(OSCILLATOR), "--listen", "tcp/127.0.0.1:0"], "--listen is where the router of --launch"),
 ])
 def test_a_scenario_or_endpoint_that_cannot_be_used_is_one_line(tmp_path: Path, command: list[str],
                                                                 words: str) -> None:

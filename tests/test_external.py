@@ -84,3 +84,24 @@ def test_a_bad_run_id_is_refused_by_the_command_line() -> None:
     done = subprocess.run([*COSIM, "run", str(OSCILLATOR), "--run-id", "a/b"], capture_output=True, text=True,
                           timeout=60)
     assert done.returncode == 2 and "--run-id 'a/b' must be 1-64 characters" in done.stderr
+
+
+def test_a_launcher_runs_the_subsim_in_its_workdir_with_its_secrets_on_standard_input(tmp_path: Path) -> None:
+    """``launcher = ["sh", "-c"]`` stands for ``ssh host``: the one shell line it gets goes to a workdir whose name
+    needs quoting, takes the secrets from standard input and runs the subsim there; the results are the plain
+    run's, byte for byte."""
+    from cosim.runner import run_scenario
+    from cosim.scenario import load
+
+    workdir = tmp_path / "lab's dir"
+    workdir.mkdir()
+    (workdir / "lab_mass.py").write_text("from subsims.oscillator.subsim import Mass as LabMass\n")  # only there
+    sc = tmp_path / "launched.toml"
+    head = '[subsims.mass2]\nmodel = "subsims.oscillator.subsim:Mass"'
+    sc.write_text(OSCILLATOR.read_text().replace(head, '[subsims.mass2]\nmodel = "lab_mass:LabMass"\n'
+                                                 f'launcher = ["sh", "-c"]\nworkdir = {json.dumps(str(workdir))}\n'
+                                                 f'python = {json.dumps(sys.executable)}'))
+    plain, launched = tmp_path / "plain.csv", tmp_path / "launched.csv"
+    run_scenario(load(OSCILLATOR), stop=0.5, output=plain, progress=False, log=lambda m: None)
+    run_scenario(load(sc), stop=0.5, output=launched, progress=False, log=lambda m: None, listen="tcp/127.0.0.1:0")
+    assert launched.read_bytes() == plain.read_bytes()

@@ -70,6 +70,14 @@ def test_good_scenario_loads_with_per_method_settings(tmp_path: Path) -> None:
         ("stop = 1.0", 'stop = 1.0\n[unified]\nfuncton = "m:f"', "unified", "unknown key(s) ['funct"),
         ('[subsims.b]\nmodel = "subsims.integrator.subsim:Integrator"', "[subsims.b]", "subsims.b", "needs model"),
         ("[subsims.b]", '[subsims."b.1"]', "subsims.b.1", "has a '.', which separates a subsim from its port"),
+        # a subsim started on another machine (launcher)
+        ("[subsims.b]", "[subsims.b]\nlauncher = 'ssh lab-2'", "subsims.b.launcher", "non-empty list of strings"),
+        ("[subsims.b]", "[subsims.b]\nlauncher = []", "subsims.b.launcher", "non-empty list of strings"),
+        ("[subsims.b]", "[subsims.b]\nworkdir = '/x'", "subsims.b.workdir", "add launcher = [...]"),
+        ("[subsims.b]", "[subsims.b]\nlauncher = ['ssh', 'h']\nexternal = true", "subsims.b",
+         "launcher (cosim starts it elsewhere) or external = true (you start it), not both"),
+        ("[subsims.b]", "[subsims.b]\nlauncher = ['ssh', 'h']\npython = 3", "subsims.b.python",
+         "must be a non-empty string"),
         # values of the wrong type: refused by key, never a bare TypeError or AttributeError
         ('to = "b.u"', "to = 3", "couplings[1].to", "must be a string, got 3"),
         ('from = ["a.y"]', 'from = ["a.y", 4]', "couplings[1].from", "must be a 'subsim.port' string or a list"),
@@ -123,3 +131,15 @@ def test_missing_file_and_bad_toml(tmp_path: Path) -> None:
         load(tmp_path / "nope.toml")
     with pytest.raises(ScenarioError, match="not valid TOML"):
         load(write(tmp_path, "stop = = 1"))
+
+
+def test_a_subsim_started_elsewhere_is_not_imported_here(tmp_path: Path) -> None:
+    """Its model lives on its machine: a module this one lacks is no error at load."""
+    text = GOOD.replace('[subsims.b]\nmodel = "subsims.integrator.subsim:Integrator"',
+                        '[subsims.b]\nmodel = "lab_only.model:Thing"\nlauncher = ["ssh", "lab-2"]\n'
+                        'workdir = "/srv/lab"\npython = "/opt/venv/bin/python"')
+    b = load(write(tmp_path, text)).subsims["b"]
+    assert (b.launcher, b.workdir, b.python, b.connect) == (("ssh", "lab-2"), "/srv/lab", "/opt/venv/bin/python", None)
+    with pytest.raises(ScenarioError, match=r"\[subsims.b\] is started on another machine .launcher.: it cannot run "
+                       "in this process"):
+        open_session(load(write(tmp_path, text)), inprocess=True)

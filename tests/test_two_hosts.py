@@ -18,6 +18,7 @@ import re
 import secrets
 import shlex
 import shutil
+import signal
 import subprocess
 import sys
 import time
@@ -30,7 +31,7 @@ from certs import make_certs
 
 from cosim.launch import terminate
 from cosim.runner import run_scenario
-from cosim.scenario import load
+from cosim.scenario import ScenarioError, load
 
 pytestmark = [pytest.mark.slow]  # the inner loop: pytest -m "not slow"
 
@@ -207,3 +208,79 @@ def test_a_cut_link_is_found_by_the_deadline_and_healed_when_it_comes_back(hosts
         if subsim is not None:
             _stop(subsim)
     assert remote.read_bytes() == local.read_bytes()
+
+
+def _children(pid: int) -> list[int]:
+    found = []
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        found += [int(c) for c in (task / "children").read_text().split()]
+    return found
+
+
+def _launched_mass2(coordinator: int, hosts: Hosts) -> int:
+    """The PID of mass2, a child of the coordinator (the launcher execs the shell, which execs the subsim), checked
+    to run in the other namespace with no secret among its arguments."""
+    away = []
+    for pid in _children(coordinator):
+        argv = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")
+        if b"mass2" in argv and b"cosim.serve" in argv:
+            assert not any(b"COSIM_SECRET" in a or b"COSIM_ZENOH_AUTH" in a for a in argv), argv
+            away.append(pid)
+    assert len(away) == 1, away
+    netns = subprocess.run(["ip", "netns", "identify", str(away[0])], capture_output=True, text=True)
+    assert netns.stdout.strip() == hosts.b  # it runs over there
+    return away[0]
+
+
+def test_a_subsim_started_on_another_host_by_its_launcher_gives_the_local_results_and_is_replaced(
+        hosts: Hosts, tmp_path: Path) -> None:
+    """``launcher`` starts mass2 in the other namespace (as ``ssh host`` would on another machine), its secrets on
+    its standard input: the results equal the one-machine run's, byte for byte; killed there mid-run it is started
+    again through its launcher and the results are still the same; the launcher never sees the secrets as
+    arguments."""
+    stop = 30.0
+    scenario = tmp_path / "oscillator-launched.toml"
+    launcher = json.dumps(["ip", "netns", "exec", hosts.b, "sh", "-c"])
+    scenario.write_text(OSCILLATOR.read_text().replace(
+        "[subsims.mass2]\n", f"[subsims.mass2]\nlauncher = {launcher}\nworkdir = {json.dumps(str(ROOT))}\n"
+                             f"python = {json.dumps(sys.executable)}\n"))
+    local = tmp_path / "local.csv"
+    run_scenario(load(OSCILLATOR), method="distributed", stop=stop, output=local, progress=False, log=lambda m: None)
+    remote = tmp_path / "remote.csv"
+    coordinator = subprocess.Popen(
+        [*hosts.exec(hosts.a), sys.executable, "-m", "cosim.cli", "run", str(scenario), "--method", "distributed",
+         "--stop", str(stop), "--output", str(remote), "--quiet", "--listen", f"tcp/{hosts.addr_a}:7447"],
+        env={**os.environ, "PYTHONPATH": str(ROOT)}, stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+        cwd=tmp_path)
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and (not remote.exists() or len(remote.read_text().splitlines()) < 100):
+            assert coordinator.poll() is None, coordinator.communicate()[1][-2000:]
+            time.sleep(0.02)
+        first = _launched_mass2(coordinator.pid, hosts)
+        os.kill(first, signal.SIGKILL)
+        while time.monotonic() < deadline and coordinator.poll() is None:  # its replacement: over there too
+            try:
+                if _launched_mass2(coordinator.pid, hosts) != first:
+                    break
+            except (AssertionError, OSError):  # not yet started, or between exec()s
+                time.sleep(0.01)
+        else:
+            pytest.fail("no replacement of mass2 was seen while the run went on")
+        _, err = coordinator.communicate(timeout=600)
+        assert coordinator.returncode == 0, err[-2000:]
+        assert "replaced (1 of 2)" in err, err[-2000:]
+    finally:
+        _stop(coordinator)
+    assert remote.read_bytes() == local.read_bytes()
+
+
+def test_a_launched_subsim_needs_an_endpoint_its_machine_can_be_told(tmp_path: Path) -> None:
+    scenario = tmp_path / "launched.toml"
+    scenario.write_text(OSCILLATOR.read_text().replace("[subsims.mass2]\n",
+                                                       "[subsims.mass2]\nlauncher = ['ssh', 'lab-2']\n"))
+    for listen, says in ((None, "give --listen tcp/"), ("tcp/0.0.0.0:0", "cannot be told")):
+        with pytest.raises(ScenarioError, match=says):
+            run_scenario(load(scenario), stop=0.1, output=tmp_path / "x.csv", progress=False, listen=listen,
+                         log=lambda m: None)
+    assert not (tmp_path / "x.csv").exists()

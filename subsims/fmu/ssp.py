@@ -33,7 +33,8 @@ COMPANION_KEYS = {"name", "description", "start", "stop", "coupling", "tolerance
 
 def expand_fmu(spec: Mapping[str, Any], scenario: Path, start: float, key: str) -> dict[str, Any]:
     """``[subsims.<name>]`` with ``fmu = "path.fmu"`` as the table it stands for: ``model`` is the FMU subsim,
-    ``params.fmu`` the path resolved against the scenario file's directory, ``params.start_time`` the start."""
+    ``params.fmu`` the path resolved against the scenario file's directory (as given, for a subsim with a
+    ``launcher``: a path on its machine), ``params.start_time`` the start."""
     table = dict(spec)
     fmu = table.pop("fmu")
     if "model" in table:
@@ -43,10 +44,13 @@ def expand_fmu(spec: Mapping[str, Any], scenario: Path, start: float, key: str) 
     params = table.get("params", {})
     if not isinstance(params, dict):
         raise ScenarioError(f"{scenario}: [{key}.params] must be a table")
-    resolved = (scenario.parent / fmu).resolve()
-    if not table.get("external", False) and not resolved.is_file():  # launched here: a typo, found before launch
-        raise ScenarioError(f"{scenario}: [{key}.fmu] no such file: {resolved}")
-    params = {**params, "fmu": str(resolved)}
+    if "launcher" in table:  # started on another machine: a path there, relative to its workdir
+        params = {**params, "fmu": fmu}
+    else:
+        resolved = (scenario.parent / fmu).resolve()
+        if not table.get("external", False) and not resolved.is_file():  # launched here: a typo, found at load
+            raise ScenarioError(f"{scenario}: [{key}.fmu] no such file: {resolved}")
+        params = {**params, "fmu": str(resolved)}
     if start != 0.0:
         params.setdefault("start_time", start)
     return {**table, "model": MODEL, "params": params}
