@@ -2,16 +2,20 @@
 
 A scenario names the user's own modules: :func:`add_search_path` puts the scenario file's
 directory and the working directory on the import path (at its end, so they never shadow an
-installed package), and :data:`SEARCH_PATH` lists what was added so that ``cosim.launch`` hands the
-same directories to the subsim processes it starts (through their ``PYTHONPATH``).
+installed package), and :data:`SEARCH_PATH` lists what was added. A scenario keeps its own two
+directories, which ``cosim.launch`` hands to the subsim processes it starts (their ``PYTHONPATH``), and
+which decide between two scenarios' modules of the same name in one interpreter (:func:`import_object`).
 """
 
 from __future__ import annotations
 
 import importlib
+import importlib.machinery
+import importlib.util
 import os
 import sys
 import traceback
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -31,12 +35,17 @@ def add_search_path(*directories: str | Path) -> None:
             importlib.invalidate_caches()
 
 
-def import_object(path: str, what: str) -> Any:
-    """The object ``name`` of ``package.module``; ValueError naming ``what`` and the path otherwise."""
+def import_object(path: str, what: str, search_path: Sequence[str] = ()) -> Any:
+    """The object ``name`` of ``package.module``; ValueError naming ``what`` and the path otherwise.
+
+    ``search_path``: the directories of the scenario that names it. A module of another scenario's
+    directories with the same name, imported earlier in this interpreter or found first on ``sys.path``,
+    is then replaced by this scenario's (a study over model variants, each in its own directory)."""
     module_name, sep, attr = str(path).partition(":")
     if not sep or not module_name or not attr:
         raise ValueError(f"{what} {path!r} must be 'package.module:name'")
     try:
+        _take_own(module_name.partition(".")[0], search_path)
         module = importlib.import_module(module_name)
     except ImportError as exc:
         raise ValueError(f"{what} {path!r} not found ({exc})") from None
@@ -46,6 +55,37 @@ def import_object(path: str, what: str) -> Any:
         return getattr(module, attr)
     except AttributeError as exc:
         raise ValueError(f"{what} {path!r} not found ({exc})") from None
+
+
+def _home(spec: importlib.machinery.ModuleSpec | None) -> str | None:
+    """The directory a top-level module or package was found in (None: built in, frozen, namespace)."""
+    if spec is None or not spec.has_location or spec.origin is None:
+        return None
+    origin = os.path.dirname(spec.origin)
+    return os.path.dirname(origin) if spec.submodule_search_locations is not None else origin
+
+
+def _take_own(top: str, search_path: Sequence[str]) -> None:
+    """Import ``top`` from ``search_path`` if what Python would use instead comes from another scenario's directory
+    (one in :data:`SEARCH_PATH`, not in ``search_path``). Installed modules are never touched."""
+    if not search_path:
+        return
+    loaded = sys.modules.get(top)
+    home = _home(getattr(loaded, "__spec__", None) if loaded is not None else importlib.util.find_spec(top))
+    if home is None or home not in SEARCH_PATH or home in search_path:
+        return
+    spec = importlib.machinery.PathFinder.find_spec(top, list(search_path))
+    if spec is None or spec.loader is None:  # this scenario's directories have none: Python's choice stands
+        return
+    for name in [k for k in sys.modules if k == top or k.startswith(top + ".")]:
+        del sys.modules[name]
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[top] = module
+    try:
+        spec.loader.exec_module(module)
+    except BaseException:
+        del sys.modules[top]
+        raise
 
 
 def _where(exc: Exception) -> str:
@@ -58,9 +98,10 @@ def _where(exc: Exception) -> str:
     return f"{type(exc).__name__}: {exc}" + (f" ({last.filename}, line {last.lineno})" if last else "")
 
 
-def load_model(path: str) -> type[Subsim]:
-    """The :class:`cosim.Subsim` subclass at ``package.module:Class``; ValueError naming the path otherwise."""
-    cls = import_object(path, "model")
+def load_model(path: str, search_path: Sequence[str] = ()) -> type[Subsim]:
+    """The :class:`cosim.Subsim` subclass at ``package.module:Class``; ValueError naming the path otherwise.
+    ``search_path``: as for :func:`import_object`."""
+    cls = import_object(path, "model", search_path)
     if not (isinstance(cls, type) and issubclass(cls, Subsim)):
         raise ValueError(f"model {path!r} is not a cosim.Subsim subclass")
     return cls

@@ -185,6 +185,7 @@ class Bus:
     attached: list[str] = field(default_factory=list)  # names of external subsims: sent shutdown on close
     private_dir: str | None = None  # the 0700 directory of a PRIVATE endpoint's socket, removed on close
     names: tuple[str, ...] | None = None  # the subsims this run may have, each with its own login (None: shared)
+    search_path: tuple[str, ...] | None = None  # its scenario's module directories (None: every one loaded so far)
     _spawned_as: dict[str, tuple[str, str | None, float | None, Elsewhere | None]] = field(default_factory=dict,
                                                                                          repr=False)
 
@@ -283,8 +284,9 @@ class Bus:
         if elsewhere is None:
             env = {**os.environ, **secrets}
             env.setdefault("PYTHONUNBUFFERED", "1")
-            if SEARCH_PATH:  # the scenario's directory and the working directory (cosim.importing)
-                env["PYTHONPATH"] = os.pathsep.join([*filter(None, [env.get("PYTHONPATH")]), *SEARCH_PATH])
+            search = SEARCH_PATH if self.search_path is None else self.search_path
+            if search:  # the scenario's directory and the working directory (cosim.importing)
+                env["PYTHONPATH"] = os.pathsep.join([*filter(None, [env.get("PYTHONPATH")]), *search])
         else:  # the launcher gets neither the secrets (they go on its standard input) nor this machine's paths
             env, argv = dict(os.environ), [*elsewhere.launcher, launcher_line(argv, elsewhere.workdir)]
         try:

@@ -115,6 +115,7 @@ def open_session(
                            names=list(scenario.subsims))
         except (ValueError, RuntimeError) as exc:  # bad --listen or security files; port taken
             raise ScenarioError(f"cannot open the bus: {exc}") from None
+        bus.search_path = scenario.search_path  # its subsims import its modules, not another scenario's
         for name, how in away.items():  # each told the endpoint its machine reaches
             try:
                 away[name] = replace(how, connect=endpoint_for(how, str(listen), bus.endpoint))

@@ -10,6 +10,7 @@ tested against it).
 from __future__ import annotations
 
 import difflib
+import os
 import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
@@ -161,9 +162,10 @@ class SubsimSpec:
     workdir: str | None = None  # with launcher: where it runs there
     python: str = "python3"  # with launcher: the Python there
     connect: str | None = None  # with launcher: the coordinator's endpoint as seen from there (None: the listen one)
+    search_path: tuple[str, ...] = ()  # the scenario's directory and the working directory: where its modules are
 
     def model_class(self) -> type[Subsim]:
-        return load_model(self.model or "")
+        return load_model(self.model or "", self.search_path)
 
 
 @dataclass(frozen=True)
@@ -199,6 +201,7 @@ class Scenario:
     run: RunSpec = RunSpec()
     security: Security | None = None  # [security]; paths relative to the scenario file
     raw: Mapping[str, Any] = field(default_factory=dict)  # the file's tables, for variants: parse({**raw, ...})
+    search_path: tuple[str, ...] = ()  # its directory and the working directory (cosim.importing)
 
     def settings_for(self, method: str | None = None) -> Settings:
         method = method or self.default_method
@@ -264,7 +267,7 @@ def parse(raw: Mapping[str, Any], path: Path) -> Scenario:
                     MappingProxyType(subsims), couplings, MappingProxyType(settings), default_method, out_path,
                     signals, p.unified(p.table(raw, "unified")), p.run(p.table(raw, "run")),
                     p.security(p.table(raw, "security")),
-                    MappingProxyType(dict(raw)))
+                    MappingProxyType(dict(raw)), p.search_path)
 
 
 def with_method(s: Scenario, method: str) -> Scenario:
@@ -276,6 +279,7 @@ class _Parser:
 
     def __init__(self, path: Path) -> None:
         self.path = path
+        self.search_path = (str(path.resolve().parent), os.path.abspath(Path.cwd()))  # as load() adds them
         self.start = 0.0
         self.shorthands = _plugins("cosim.subsim_shorthands")
 
@@ -348,7 +352,7 @@ class _Parser:
         elsewhere = self.launcher(spec, key, external)
         if model is not None and not elsewhere:  # one started elsewhere imports it there, not here
             try:
-                load_model(model)
+                load_model(model, self.search_path)
             except ValueError as exc:
                 raise self.fail(f"{key}.model", str(exc)) from None
         params = self.table(spec, "params", f"{key}.params")
@@ -359,7 +363,7 @@ class _Parser:
                 raise self.fail(f"{key}.inputs.{port}", f"must be a number or a list of numbers, got {value!r}")
             inputs[port] = tuple(float(v) for v in values)
         return SubsimSpec(name, model, external, MappingProxyType(dict(params)), MappingProxyType(inputs),
-                          **elsewhere)
+                          **elsewhere, search_path=self.search_path)
 
     def launcher(self, spec: Mapping[str, Any], key: str, external: bool) -> dict[str, Any]:
         """The launcher keys of a subsim started on another machine, as SubsimSpec fields ({} if none)."""
@@ -397,7 +401,8 @@ class _Parser:
         if not sources or not all(isinstance(src, str) for src in sources):
             raise self.fail(f"{key}.from", f"must be a 'subsim.port' string or a list of them, got {c['from']!r}")
         try:
-            coupling = Coupling.make(c["to"], c["from"], c.get("transform", "identity"), c.get("params", {}))
+            coupling = Coupling.make(c["to"], c["from"], c.get("transform", "identity"), c.get("params", {}),
+                                     self.search_path)
         except (ValueError, TypeError) as exc:
             raise self.fail(key, str(exc)) from None
         for ref in (coupling.target, *coupling.sources):

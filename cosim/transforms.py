@@ -45,13 +45,14 @@ def _apply(k: np.ndarray, x: np.ndarray) -> np.ndarray:
 BUILTIN: dict[str, Transform] = {"identity": identity, "gain": gain, "linear": linear}
 
 
-def resolve(name: str) -> Transform:
-    """A built-in name or ``"module:function"``; raises ValueError naming what was not found."""
+def resolve(name: str, search_path: Sequence[str] = ()) -> Transform:
+    """A built-in name or ``"module:function"`` (``search_path``: its scenario's directories, see
+    :func:`cosim.importing.import_object`); raises ValueError naming what was not found."""
     if name in BUILTIN:
         return BUILTIN[name]
     if ":" not in name:
         raise ValueError(f"unknown transform {name!r}: use one of {sorted(BUILTIN)} or 'package.module:function'")
-    fn = import_object(name, "transform")
+    fn = import_object(name, "transform", search_path)
     if not callable(fn):
         raise ValueError(f"transform {name!r} is not callable")
     return fn

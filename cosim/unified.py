@@ -36,7 +36,7 @@ def resolve_function(scenario: Scenario) -> Any:
     if not name:
         raise ScenarioError(f"{scenario.path}: no [unified] function: this scenario has no unified reference")
     try:
-        fn = import_object(name, "unified function")
+        fn = import_object(name, "unified function", scenario.search_path)
     except ValueError as exc:
         raise ScenarioError(f"{scenario.path}: [unified.function] {exc}") from None
     if not callable(fn):

@@ -75,3 +75,42 @@ def test_modules_beside_the_scenario_and_in_the_working_directory(tmp_path: Path
     assert data[-1, 0] == 0.5
     assert list(data[:, 1]) == list(t)  # y = t
     assert abs(data[-1, 2] - 0.25) < 1e-14  # the integral of 2 t from 0 to 0.5
+
+
+VARIANT = '''
+import numpy as np
+from cosim import Port, Subsim
+
+
+class Ramp(Subsim):
+    """y' = RATE."""
+    outputs = {"y": Port(1)}
+
+    def initial_state(self, params):
+        return np.zeros(1)
+
+    def advance(self, state, times, u):
+        y = state[0] + RATE * (times - times[0])
+        return {"y": y[:, None]}, y[-1:]
+'''
+
+
+@pytest.mark.parametrize("inprocess", [True, False], ids=["inprocess", "launched"])
+def test_two_scenarios_with_a_module_of_the_same_name_each_run_their_own(tmp_path: Path, inprocess: bool,
+                                                                        monkeypatch: pytest.MonkeyPatch) -> None:
+    """A study over model variants, each in its own directory under the same module name, in one interpreter: each
+    scenario runs its own module, not the one the first scenario imported (nor the first on sys.path)."""
+    import cosim
+
+    work = tmp_path / "work"
+    work.mkdir()
+    for rate in (1, 3):
+        d = tmp_path / f"variant{rate}"
+        d.mkdir()
+        (d / "variant_model.py").write_text(f"RATE = {rate}.0\n" + VARIANT)
+        (d / "s.toml").write_text(SCENARIO.replace("beside_scenario:Ramp", "variant_model:Ramp")
+                                  .replace('transform = "in_cwd:double"\n', ""))
+    monkeypatch.chdir(work)
+    ends = [float(cosim.run(tmp_path / f"variant{rate}" / "s.toml", inprocess=inprocess)["ramp.y"][-1, 0])
+            for rate in (1, 3, 1)]
+    assert ends == [0.5, 1.5, 0.5]

@@ -45,13 +45,15 @@ class Coupling:
 
     @classmethod
     def make(
-        cls, target: str, sources: str | Sequence[str], transform: str = "identity", params: Mapping | None = None
+        cls, target: str, sources: str | Sequence[str], transform: str = "identity", params: Mapping | None = None,
+        search_path: Sequence[str] = (),
     ) -> Coupling:
+        """``search_path``: the directories of the scenario that names a ``module:function`` transform."""
         srcs = (sources,) if isinstance(sources, str) else tuple(sources)
         if not srcs:
             raise ValueError(f"coupling to {target!r} has no source")
         return cls(
-            SignalRef.parse(target), tuple(SignalRef.parse(s) for s in srcs), resolve(transform),
+            SignalRef.parse(target), tuple(SignalRef.parse(s) for s in srcs), resolve(transform, search_path),
             dict(params or {}), transform,
         )
 
