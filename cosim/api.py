@@ -12,14 +12,18 @@ command line: the result file is written only when ``output`` is given. See docs
 
 from __future__ import annotations
 
+import math
+import signal
 import tempfile
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from cosim import interrupt
+from cosim.console import say
 from cosim.coupler.relaxation import Interval, RunSummary
 from cosim.results import DIAG_COLUMNS, read_results
 from cosim.runner import run_scenario
@@ -51,8 +55,11 @@ class Result:
         """One column as the result file names it: ``"time"`` or ``"subsim.port[i]"``."""
         if name == "time":
             return self.t
-        signal, _, index = name.rpartition("[")
-        return self[signal][:, int(index.rstrip("]"))]
+        signal_name, bracket, index = name.rpartition("[")
+        if not bracket or not index.endswith("]") or not index[:-1].isdigit():
+            raise KeyError(f"column {name!r}: name one as 'subsim.port[i]' (or 'time'); r[{name!r}] is the whole "
+                           "signal")
+        return self[signal_name][:, int(index[:-1])]
 
 
 class _Collect:
@@ -102,6 +109,8 @@ def run(
     restarts: int | None = None,
     timeout: float | None = None,
     resume: bool = False,
+    on_interval: Callable[[Interval], None] | None = None,
+    log: Callable[[str], None] = say,
 ) -> Result:
     """Run a scenario as ``cosim run`` does and return its time series.
 
@@ -111,35 +120,65 @@ def run(
     file). ``output``: also write the result file (.csv or .npz) and its diagnostics. The other
     arguments are those of ``cosim run``. ``resume``: go on with the interrupted run that wrote ``output``
     (required then) from its latest resume point; the result is then the whole run, read back from its
-    file. Raises ``ScenarioError``, ``SubsimError``, ``NotConverged``, ``TransformError``, ``OutputError``.
+    file. ``on_interval``: called with each committed :class:`~cosim.coupler.relaxation.Interval` as the
+    run goes (an exception it raises stops the run). ``log``: where the run's lines go (default: stderr).
+    Raises ``ScenarioError``, ``SubsimError``, ``NotConverged``, ``TransformError``, ``OutputError``.
+    A Ctrl-C (SIGINT) stops the run as the command's does, raising ``KeyboardInterrupt`` once every subsim is
+    stopped and every result file finished; a second one does not cut that short.
     """
     sc = scenario if isinstance(scenario, Scenario) else load(scenario)
-    if params:
+    if params is not None:
         sc = _with_params(sc, params)
     method = method or sc.default_method
+    _check_arguments(sc, stop, restarts, timeout, attach_wait)
     if resume and output is None:
         raise ScenarioError("resume=True goes on with the results of an interrupted run: give its output= file")
     if resume and method == "unified":
         raise ScenarioError("resume=True continues coupled runs (centralized, distributed), not unified ones")
-    with tempfile.TemporaryDirectory(prefix="cosim-run-") as scratch:
-        path = Path(output) if output is not None else Path(scratch) / "results.csv"
-        if method == "unified":
-            report = run_unified(sc, stop=stop, output=path)
-            return _from_file(sc, report, output)
-        collect = _Collect()
-        report = run_scenario(sc, method=method, stop=stop, output=path, inprocess=inprocess, listen=listen,
-                              progress=progress, on_interval=None if resume else collect, run_id=run_id,
-                              attach_wait=attach_wait, restarts=restarts, timeout=timeout, resume=resume)
-        if resume:  # the intervals before the resume point are in the file only
-            return _from_file(sc, report, output)
+    if method == "unified":
+        with tempfile.TemporaryDirectory(prefix="cosim-run-") as scratch:  # it reads back what it wrote
+            path = Path(output) if output is not None else Path(scratch) / "results.csv"
+            return _from_file(sc, run_unified(sc, stop=stop, output=path, on_interval=on_interval), output)
+    collect = _Collect()
+
+    def each(interval: Interval) -> None:
+        collect(interval)
+        if on_interval is not None:
+            on_interval(interval)
+
+    with interrupt.handling((signal.SIGINT,)):  # the script keeps its own SIGTERM and SIGHUP
+        report = run_scenario(sc, method=method, stop=stop, output=None if output is None else Path(output),
+                              inprocess=inprocess, listen=listen, progress=progress, log=log, on_interval=each,
+                              run_id=run_id, attach_wait=attach_wait, restarts=restarts, timeout=timeout,
+                              resume=resume, record=output is not None)
+    if resume:  # the intervals before the resume point are in the file only
+        return _from_file(sc, report, output)
     t, signals, diag = collect.arrays()
     return Result(sc, report.method, t, signals, diag, report.summary, report.order, report.feedback,
                   Path(output) if output is not None else None)
 
 
+def _check_arguments(sc: Scenario, stop: Any, restarts: Any, timeout: Any, attach_wait: Any) -> None:
+    """The numbers ``cosim run`` checks on its command line, checked here too: one line each."""
+    def number(value: Any) -> bool:
+        return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+    if stop is not None and not (number(stop) and stop > sc.start):
+        raise ScenarioError(f"stop must be a finite time after the scenario's start ({sc.start:g} s), got {stop!r}")
+    for name, value in (("timeout", timeout), ("attach_wait", attach_wait)):
+        if value is not None and not (number(value) and value > 0):
+            raise ScenarioError(f"{name} must be a finite number of seconds > 0, got {value!r}")
+    if restarts is not None and (isinstance(restarts, bool) or not isinstance(restarts, int) or restarts < 0):
+        raise ScenarioError(f"restarts must be a whole number >= 0, got {restarts!r}")
+
+
 def _with_params(sc: Scenario, params: Mapping[str, Mapping[str, Any]]) -> Scenario:
     raw = {**sc.raw, "subsims": {k: dict(v) for k, v in sc.raw["subsims"].items()}}
+    if not isinstance(params, Mapping):
+        raise ScenarioError(f"params must be {{subsim: {{parameter: value}}}}, got {type(params).__name__}")
     for name, values in params.items():
+        if not isinstance(values, Mapping):
+            raise ScenarioError(f"params[{name!r}] must be {{parameter: value}}, got {type(values).__name__}")
         if name not in raw["subsims"]:
             raise ScenarioError(f"{sc.path}: params for unknown subsim {name!r}; subsims: {', '.join(sc.subsims)}")
         raw["subsims"][name]["params"] = {**raw["subsims"][name].get("params", {}), **values}

@@ -199,7 +199,7 @@ class Bus:
         subsim's keys, so no subsim can read or answer another's requests (``--auth-file`` users may serve any
         of them). Without names, every subsim shares the run's login and may serve any subsim key."""
         security = (security or Security()).check()
-        run, secret = run or new_run_id(), new_master_secret()
+        run, secret = new_run_id() if run is None else check_name(run, "run id"), new_master_secret()
         site = read_dictionary(security.auth_file) if security.auth_file else {}
         if names is None:
             user, password = zenoh_login(secret, run)
@@ -279,6 +279,10 @@ class Bus:
         """Start ``python -m module`` (or ``cosim.serve model``) as subsim ``name``, here or ``elsewhere`` through
         its launcher; wait until it answers."""
         secrets = self.subsim_env(name)
+        serving = [p.popen.pid for p in self.processes if p.name == name and p.popen.poll() is None]
+        if serving:  # a second process would share its key: requests to either would reach the first
+            raise ValueError(f"subsim {name!r} is served by process {serving[0]} of this bus already: give the "
+                             "other one its own name (or respawn it)")
         self._spawned_as[name] = (module, model, lease, elsewhere)  # for respawn, even if this start fails
         argv = [*self.command(module, name, model, lease=lease, elsewhere=elsewhere), "--quiet-stop"]
         if elsewhere is None:

@@ -36,11 +36,26 @@ Log = Callable[[str], None]
 class RunReport:
     method: str
     summary: RunSummary
-    output: Path
-    diagnostics: Path
+    output: Path | None  # None: a run that wrote no file (record=False)
+    diagnostics: Path | None
     order: list[str]
     feedback: list[str]
     extra: dict = field(default_factory=dict)
+
+
+class Unrecorded:
+    """The writer of a run that keeps no result file: every interval counts as written at once."""
+
+    t_last = None
+
+    def write_steps(self, interval: Interval) -> Iterator[None]:
+        return iter(())
+
+    def holds(self, interval: Interval) -> bool:
+        return True
+
+    def close(self, failed_run: bool = False) -> None:
+        pass
 
 
 @dataclass
@@ -269,24 +284,29 @@ def run_scenario(
     run_id: str | None = None,
     attach_wait: float = 300.0,
     resume: bool = False,
+    record: bool = True,
 ) -> RunReport:
     """Run ``scenario``. ``overwrite=False`` refuses an existing result (OutputError) before anything is
     launched; ``restarts`` and ``timeout`` override its [run] table (see ``cosim.scenario.KEYS``). ``resume``:
-    go on with the interrupted run that wrote ``output``, from its latest resume point (:mod:`cosim.resume`)."""
+    go on with the interrupted run that wrote ``output``, from its latest resume point (:mod:`cosim.resume`).
+    ``record=False``: no result file and no resume point; the intervals reach ``on_interval`` only."""
+    if resume and not record:
+        raise ValueError("resume goes on with a run's result file: it needs record=True")
     method = method or scenario.default_method
     settings = scenario.settings_for(method)
     stop = scenario.stop if stop is None else stop
     output = Path(output) if output is not None else default_output(scenario, method)
-    lock = reserve_output(output, overwrite or resume)  # locked and checked before anything is launched
+    lock = reserve_output(output, overwrite or resume) if record else None  # locked before anything is launched
     key = fingerprint(scenario.raw, method)  # what a resume point of this run is saved under
     try:
         saved = _resume_point(scenario, method, key, output, stop) if resume else None
-        if saved is None:
+        if saved is None and record:
             resume_path(output).unlink(missing_ok=True)  # an older run's: not this one's
         session = open_session(scenario, inprocess=inprocess, listen=listen, log=log, security=security,
                                run_id=run_id, external_wait=attach_wait)
     except BaseException:
-        lock.release()
+        if lock is not None:
+            lock.release()
         raise
     try:
         if saved is not None:
@@ -300,11 +320,11 @@ def run_scenario(
         checkpoints: list[Saved] = []  # taken, their intervals not yet written
         coordinator = Coordinator(session.handles, session.plans[method], settings, recovery=recovery,
                                   deadline=deadline, checkpoint_every=spec.checkpoint_every,
-                                  on_checkpoint=lambda point, states: checkpoints.append(
+                                  on_checkpoint=None if lock is None else lambda point, states: checkpoints.append(
                                       Saved(key, scenario.start, point, states)))
-        writer = ResultWriter(output, output_signals(scenario, session.descriptions),
-                              output_units(session.descriptions), lock=lock,
-                              resume_at=None if saved is None else saved.point.t)
+        writer: ResultWriter | Unrecorded = Unrecorded() if lock is None else ResultWriter(
+            output, output_signals(scenario, session.descriptions), output_units(session.descriptions), lock=lock,
+            resume_at=None if saved is None else saved.point.t)
         bar = Progress(scenario.start if saved is None else saved.point.t, stop, enabled=progress)
 
         def each(interval: Interval) -> Iterator[None]:  # in steps: the coordinator writes while it waits
@@ -328,10 +348,14 @@ def run_scenario(
             raise
         writer.close()
         bar.done()
+        if lock is None:
+            return RunReport(method, summary, None, None, coordinator.order, [str(c) for c in coordinator.feedback],
+                             {"restarts": coordinator.restarts})
         resume_path(output).unlink(missing_ok=True)  # finished: nothing to resume
         return RunReport(method, summary, output, diag_path(output), coordinator.order,
                          [str(c) for c in coordinator.feedback], {"restarts": coordinator.restarts})
     finally:
         with interrupt.deferred():  # a signal arriving now must not cut the subsims' stop short
             session.close()
-        lock.release()  # if the writer never took it
+        if lock is not None:
+            lock.release()  # if the writer never took it

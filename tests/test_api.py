@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import os
+import re
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -100,3 +103,64 @@ def test_resume_goes_on_with_an_interrupted_run_and_returns_the_whole_run(tmp_pa
     for name, values in whole.signals.items():
         assert same_bits(r[name], values), name
     assert same_bits(r.diagnostics["t1"], whole.diagnostics["t1"])
+
+
+TWO_CTRL_C = '''
+import os, signal, sys, threading, time
+from pathlib import Path
+import cosim
+
+def children():
+    return [int(c) for t in Path(f"/proc/{os.getpid()}/task").iterdir() for c in (t / "children").read_text().split()]
+
+def ctrl_c_twice():
+    while len(children()) < 2:  # both subsims started
+        time.sleep(0.01)
+    time.sleep(0.5)  # mid-run
+    os.kill(os.getpid(), signal.SIGINT)
+    time.sleep(0.01)
+    os.kill(os.getpid(), signal.SIGINT)
+
+threading.Thread(target=ctrl_c_twice, daemon=True).start()
+try:
+    cosim.run(sys.argv[1], stop=1000.0)
+except KeyboardInterrupt:
+    print("KeyboardInterrupt", children(), sorted(os.listdir(os.environ["TMPDIR"])))
+'''
+
+
+def test_a_second_ctrl_c_does_not_cut_the_cleanup_short(tmp_path: Path) -> None:
+    """Two SIGINTs 10 ms apart while cosim.run runs over the bus: one KeyboardInterrupt, raised once both subsim
+    processes are stopped and reaped, and the run's private bus directory removed (a second Ctrl-C used to land
+    in the middle of that)."""
+    scratch = tmp_path / "tmp"
+    scratch.mkdir()
+    done = subprocess.run([sys.executable, "-c", TWO_CTRL_C, str(OSCILLATOR)], capture_output=True, text=True,
+                          timeout=120, env={**os.environ, "TMPDIR": str(scratch)})
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.strip() == "KeyboardInterrupt [] []", done.stdout + done.stderr[-2000:]
+
+
+def test_arguments_the_command_would_refuse_are_refused_in_one_line(tmp_path: Path) -> None:
+    for kwargs, words in (({"stop": -1.0}, "stop must be a finite time after the scenario's start (0 s), got -1.0"),
+                          ({"stop": float("nan")}, "stop must be a finite time"),
+                          ({"stop": "1.0"}, "got '1.0'"),
+                          ({"restarts": -1}, "restarts must be a whole number >= 0"),
+                          ({"timeout": 0}, "timeout must be a finite number of seconds > 0"),
+                          ({"params": {"mass1": 3}}, "params['mass1'] must be {parameter: value}, got int"),
+                          ({"run_id": "pa/bad"}, "run id 'pa/bad' must be 1-64 characters")):
+        with pytest.raises(ScenarioError, match=re.escape(words)):
+            cosim.run(OSCILLATOR, **kwargs)
+
+
+def test_a_run_without_output_writes_nothing_and_an_interval_callback_sees_each_interval(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    monkeypatch.chdir(tmp_path)
+    seen: list[float] = []
+    r = cosim.run(OSCILLATOR, stop=0.3, inprocess=True, on_interval=lambda i: seen.append(float(i.t[-1])),
+                  log=lambda line: None)
+    assert list(tmp_path.iterdir()) == []  # no scratch directory, no results/ directory
+    assert seen == list(r.diagnostics["t1"]) and len(seen) == 6
+    with pytest.raises(KeyError, match=r"name one as 'subsim.port\[i\]'"):
+        r.column("mass1.u")
