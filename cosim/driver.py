@@ -386,7 +386,7 @@ class Coordinator:
         fatal = [e for e in errors.values() if not _recoverable(e)]
         left = 0 if self.recovery is None else self.recovery.restarts - len(self.restarts)
         if fatal or len(errors) > left:
-            raise fatal[0] if fatal else next(iter(errors.values()))
+            raise fatal[0] if fatal else self._out_of_restarts(next(iter(errors.values())))
         for name, exc in errors.items():
             self._replace(name, exc)
         if replace:
@@ -422,9 +422,19 @@ class Coordinator:
             try:
                 return call(self.handles[name])
             except Exception as exc:
-                if not _recoverable(exc) or self.recovery is None or len(self.restarts) >= self.recovery.restarts:
+                if not _recoverable(exc) or self.recovery is None:
                     raise
+                if len(self.restarts) >= self.recovery.restarts:
+                    raise self._out_of_restarts(exc) from None
                 self._replace(name, exc)
+
+    def _out_of_restarts(self, exc: Exception) -> Exception:
+        """A subsim lost with every restart used: the error says so (the replacements were only logged)."""
+        if self.recovery is None or not self.recovery.restarts or not isinstance(exc, SubsimError):
+            return exc
+        used = len(self.restarts)
+        return type(exc)(exc.code, f"{exc.message} (no restarts left: {used} of {self.recovery.restarts} used)",
+                         exc.subsim, exc.command, exc.traceback)
 
     def _replace(self, name: str, why: Exception) -> None:
         """A new process for ``name`` at its last checkpoint, with every committed interval since replayed. A

@@ -13,10 +13,13 @@ spawned is stopped (shutdown, then SIGTERM, then SIGKILL) even when the test fai
 
 from __future__ import annotations
 
+import importlib.util
 from collections.abc import Callable, Iterator
+from pathlib import Path
 
 import pytest
 
+from cosim.importing import add_search_path, load_model
 from cosim.launch import Bus
 from cosim.protocol.transport.client import RemoteHandle
 
@@ -41,8 +44,22 @@ def spawn_subsim(cosim_bus: Bus) -> Callable[..., RemoteHandle]:
     the last part of the module name."""
 
     def spawn(target: str, name: str | None = None, timeout: float = 60.0) -> RemoteHandle:
+        _check_importable(target)
         module, _, cls = target.partition(":")
         name = name or module.rsplit(".", 1)[-1]
         return cosim_bus.spawn(module, name, timeout=timeout, model=target if cls else None).handle
 
     return spawn
+
+
+def _check_importable(target: str) -> None:
+    """A target that cannot be imported, said here in one line (the process would only exit with code 2, its
+    reason in the test's captured stderr). Like the process, this looks in the working directory too."""
+    add_search_path(Path.cwd())
+    try:
+        if ":" in target:
+            load_model(target)
+        elif importlib.util.find_spec(target) is None:
+            raise ValueError(f"no module named {target!r}")
+    except (ValueError, ImportError) as exc:
+        raise ValueError(f"spawn_subsim({target!r}): {exc}") from None

@@ -152,3 +152,18 @@ def test_a_subsim_started_by_hand_shows_its_models_errors_on_its_own_terminal(tm
     assert "boom: run_interval failed: [model_exception] advance() raised ZeroDivisionError: division by zero" \
         in err_text, err_text
     assert 'raising.py", line 14, in advance' in err_text and "bad_value" not in err_text, err_text
+
+
+def test_a_second_process_for_a_name_the_bus_serves_is_refused(cosim_bus: Bus) -> None:
+    first = cosim_bus.spawn("subsims.integrator", "twice")
+    with pytest.raises(ValueError, match=rf"'twice' is served by process {first.popen.pid} of this bus already"):
+        cosim_bus.spawn("subsims.integrator", "twice")
+    assert first.handle.status()["configured"] is False and len(cosim_bus.processes) == 1
+
+
+def test_spawn_subsim_names_a_target_it_cannot_import(spawn_subsim) -> None:
+    with pytest.raises(ValueError, match=r"spawn_subsim\('no_such_module:Thing'\): model 'no_such_module:Thing' "
+                                         r"not found \(No module named 'no_such_module'\)"):
+        spawn_subsim("no_such_module:Thing")
+    with pytest.raises(ValueError, match=r"spawn_subsim\('subsims.no_such'\): no module named 'subsims.no_such'"):
+        spawn_subsim("subsims.no_such")

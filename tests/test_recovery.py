@@ -242,9 +242,9 @@ def test_with_no_restarts_left_the_failure_stops_the_run() -> None:
     with Bus.open() as bus:
         ring = Ring(bus, "distributed", restarts=0)
         ring.coordinator.on_stage = lambda stage, out: kill(ring.pid("c")) if stage == 1 else None
-        with pytest.raises(SubsimDied):
+        with pytest.raises(SubsimDied) as err:
             ring.run()
-        assert ring.coordinator.restarts == []
+        assert ring.coordinator.restarts == [] and "restarts" not in str(err.value)  # none were allowed
 
 
 class FailingRevivals(Ring):
@@ -348,6 +348,7 @@ def test_a_model_stuck_in_advance_is_found_and_the_run_fails_when_every_replacem
         with pytest.raises(SubsimError) as err:
             ring.run()
         assert isinstance(err.value, SubsimHung) and err.value.subsim == "b"
+        assert str(err.value).endswith("(no restarts left: 1 of 1 used)"), str(err.value)  # not only in the log
         assert [r.subsim for r in ring.coordinator.restarts] == ["b"]
         assert time.monotonic() - started < 20  # two 1 s deadlines and a restart, not a 30 s model
 
