@@ -1,6 +1,7 @@
 """Check a running subsim, in any language, against docs/protocol.md.
 
     python -m cosim.conformance ENDPOINT RUN NAME [--params JSON] [--interval H] [--samples N] [--wait S]
+                                [--ending shutdown|coordinator]
 
 The checker is the coordinator: it opens a Zenoh router listening on ENDPOINT (``tcp/127.0.0.1:0``
 picks a free port, printed on stderr) with run id RUN, waits for the subsim NAME to appear (start it
@@ -8,7 +9,9 @@ with ``--connect <endpoint> --run RUN --name NAME`` and the two environment vari
 subsim's key and the router login, as ``cosim run`` gives them to an external subsim), then sends it well-formed and
 malformed requests and checks every reply: envelope and result types, error codes, that nothing
 committed changes on a failed request, determinism, commit / rollback / stale-trial / set_state
-semantics, and that ``shutdown`` ends it. Give it a freshly started subsim: it configures it (with
+semantics and the history they keep, the seals of section 4.1 (no reply to what is not sealed for this
+request), the request cap, and that ``shutdown`` (or, with ``--ending coordinator``, the checker's
+token withdrawn) ends it. Give it a freshly started subsim: it configures it (with
 ``--params``, default ``{}``: the model's own defaults) and runs it on zero inputs from t0 = 0.
 
 Each violation is printed on one line (``FAIL <check>: <what>``); the exit code is 0 when there is
@@ -20,9 +23,11 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import secrets
 import sys
 import time
 from collections.abc import Callable, Sequence
+from types import SimpleNamespace
 from typing import Any
 
 import msgpack
@@ -40,6 +45,7 @@ from cosim.protocol.messages import (
     open_reply,
     seal_request,
 )
+from cosim.protocol.service import REPLAY_WINDOW, default_request_cap
 from cosim.protocol.wire import encode_array
 
 Send = Callable[[bytes], "bytes | None"]  # request payload -> reply payload (None: no reply at all)
@@ -60,6 +66,7 @@ class Checker:
         self.send, self.name = send, name
         self.violations: list[str] = []
         self.checks = 0
+        self.description: dict | None = None  # what configure returned
 
     def fail(self, check: str, what: str) -> None:
         self.violations.append(f"FAIL {check}: {what}")
@@ -123,6 +130,13 @@ def run_checks(send: Send, name: str, params: dict | None = None, interval: floa
         c.fail("describe", "configured before configure: give the checker a freshly started subsim")
         return c
 
+    before = c.ok("status", "status")
+    c.error("not msgpack", b"\xc1", {"decode"}, "?")
+    after = c.ok("status", "status")
+    if before is not None and after is not None and after["requests"] - before["requests"] != 1:
+        c.fail("status", f"requests went from {before['requests']} to {after['requests']} over an undecodable "
+               "request and a status: it counts the requests that decoded, this one included (expected +1)")
+
     for cmd in ("run_interval", "commit", "rollback", "get_state", "set_state"):
         args = {"run_interval": {"t": encode_array(np.array([0.0, 1.0])), "inputs": {}},
                 "set_state": {"time": 0.0, "state": encode_array(np.zeros(1))}}.get(cmd, {})
@@ -131,6 +145,7 @@ def run_checks(send: Send, name: str, params: dict | None = None, interval: floa
     d = c.ok("configure", "configure", {"params": params or {}, "t0": 0.0})
     if d is None:
         return c
+    c.description = d
     if not d["configured"] or d["time"] != 0.0:
         c.fail("configure", f"the description after configure says configured={d['configured']}, time={d['time']}")
     ins = {p: v["size"] for p, v in d["inputs"].items()}
@@ -177,7 +192,12 @@ def run_checks(send: Send, name: str, params: dict | None = None, interval: floa
 
     t2, t3 = t + interval, t + 2 * interval
     t2[0], t3[0] = t[-1], t2[-1]
-    c.ok("run_interval from the new committed time", "run_interval", {"t": t2, "inputs": zeros})
+    nxt = c.ok("run_interval from the new committed time", "run_interval", {"t": t2, "inputs": zeros})
+    for p in outs if nxt is not None else ():  # the same state and the same (zero) inputs at that time
+        if p in a["outputs"] and p in nxt["outputs"] and not np.allclose(
+                nxt["outputs"][p][0], a["outputs"][p][-1], rtol=1e-9, atol=1e-300, equal_nan=False):
+            c.fail("run_interval", f"output {p}: row 0 {nxt['outputs'][p][0].tolist()} is not the output at the "
+                   f"committed time (the committed run's last row {a['outputs'][p][-1].tolist()}): row 0 is at t[0]")
     c.error("commit: true with a grid not starting at the trial's end",
             _request("run_interval", {"t": encode_array(t2), "inputs": {p: encode_array(v) for p, v in zeros.items()},
                                       "commit": True}), {"time_mismatch"}, "run_interval")
@@ -200,14 +220,34 @@ def run_checks(send: Send, name: str, params: dict | None = None, interval: floa
         c.error("commit of a trial made before set_state", _request("commit"), {"stale_trial"}, "commit")
         if c.committed() != (snap["time"], snap["state"].tobytes()):
             c.fail("set_state", "get_state after set_state(get_state()) is not the same bits")
+        if _history_cleared(c, "set_state", float(t[0])):  # it rolled back: put the state back for the rest
+            c.ok("set_state", "set_state", {"time": snap["time"], "state": snap["state"]})
         after = c.ok("run_interval after set_state", "run_interval", {"t": t2, "inputs": zeros})
         if before and after and any(before["outputs"][p].tobytes() != after["outputs"][p].tobytes() for p in outs):
             c.fail("set_state", "a run from the restored state differs from the same run before")
 
-    c.ok("configure again", "configure", {"params": params or {}, "t0": 0.0})
-    c.error("rollback after configure", _request("rollback", {"to_time": float(t[-1])}), {"not_in_history"},
-            "rollback")
+    if c.ok("commit", "commit") is not None and c.ok("run_interval", "run_interval", {"t": t3, "inputs": zeros}):
+        c.ok("configure again", "configure", {"params": params or {}, "t0": 0.0})  # history [t[-1]], a trial
+        c.error("commit of a trial made before configure", _request("commit"), {"stale_trial"}, "commit")
+        _history_cleared(c, "configure", float(t[-1]))
     return c
+
+
+def _history_cleared(c: Checker, after: str, earlier: float) -> bool:
+    """After ``set_state`` or ``configure`` the history is empty: ``status`` says 0 and a rollback to a time
+    committed before it is ``not_in_history``. True if that rollback was accepted (the state moved)."""
+    st = c.ok(f"status after {after}", "status")
+    if st is not None and st["history"] != 0:
+        c.fail(after, f"status.history is {st['history']} after {after}, expected 0 (it clears the history)")
+    check = f"rollback after {after} to a time committed before it"
+    r = c.reply(check, "rollback", _request("rollback", {"to_time": earlier}))
+    if isinstance(r, ErrorInfo):
+        if r.code != "not_in_history":
+            c.fail(check, f"error code {r.code!r}, expected not_in_history ({r.message})")
+        return False
+    if r is not None:
+        c.fail(check, "accepted; expected an error ['not_in_history']")
+    return r is not None
 
 
 def _malformed(c: Checker, t: np.ndarray, ins: dict[str, int], zeros: dict, params: dict | None, d: dict,
@@ -276,6 +316,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--interval", type=float, default=0.1, help="interval length for the runs (default 0.1)")
     p.add_argument("--samples", type=int, default=5, help="samples per interval (default 5)")
     p.add_argument("--wait", type=float, default=60.0, help="seconds to wait for the subsim (default 60)")
+    p.add_argument("--ending", choices=("shutdown", "coordinator"), default="shutdown",
+                   help="how the checks end it: a shutdown request (default), or the coordinator's liveliness "
+                        "token withdrawn (section 3); start it again to check the other")
     args = p.parse_args(argv)
     try:
         check_name(args.run, "run")
@@ -319,11 +362,80 @@ def main(argv: Sequence[str] | None = None) -> int:
             return None if body is None else bytes(body)
 
         checker = run_checks(send, args.name, args.params, args.interval, args.samples)
-        _check_shutdown(checker, bus, args.name)
+        _check_seals(checker, bus, args.name)
+        if args.ending == "shutdown":
+            _check_shutdown(checker, bus, args.name)
+        else:
+            _check_coordinator_left(checker, bus, args.name)
     for line in checker.violations:
         print(line)
     print(f"{args.name}: {checker.checks} requests, {len(checker.violations)} violation(s)", file=sys.stderr)
     return 1 if checker.violations else 0
+
+
+def _check_seals(c: Checker, bus: Bus, name: str, wait: float = 1.0) -> None:
+    """Section 4.1 and 3: frames not sealed with the subsim's key, replays, seqs below the window and queries on
+    other key expressions get no reply at all; a body over the default request cap gets ``too_large``."""
+    key, rpc = bus.key(name), rpc_key(bus.run, name)
+
+    def replies(payload: bytes, on: str = rpc) -> list[bytes]:
+        c.checks += 1
+        return bus.query(on, payload, wait)
+
+    status = encode_request("status")
+    silent = {
+        "an unsealed frame": status,
+        "a frame sealed with another key": seal_request(secrets.token_bytes(32), next_seq(), status + b" " * 40),
+        f"a seq {2 * REPLAY_WINDOW} below the highest accepted": seal_request(key, next_seq() - 2 * REPLAY_WINDOW,
+                                                                            status),
+    }
+    for what, frame in silent.items():
+        if replies(frame):
+            c.fail("seal", f"{what} was answered; it must get no reply (section 4.1)")
+    seq = next_seq()
+    frame = seal_request(key, seq, status)
+    if not any(open_reply(key, seq, r) is not None for r in replies(frame)):
+        c.fail("seal", "a correctly sealed status got no reply with a valid tag")
+    elif replies(frame):
+        c.fail("seal", "a replayed frame (the same seq again) was answered; it must get no reply (section 4.1)")
+    other = f"cosim/{bus.run}/*/rpc"  # (the router's access control keeps `**` queries from subsims anyway)
+    if replies(seal_request(key, next_seq(), status), other):
+        c.fail("seal", f"a query on {other} was answered; only queries on exactly {rpc} are (section 1)")
+    ports = {p: SimpleNamespace(size=v["size"]) for p, v in (c.description or {}).get("inputs", {}).items()}
+    cap = default_request_cap(ports)  # type: ignore[arg-type]
+    seq = next_seq()
+    answer = [open_reply(key, seq, r) for r in replies(seal_request(key, seq, b"\x00" * (cap + 1)))]
+    opened = [bytes(a) for a in answer if a is not None]
+    if not opened:
+        c.fail("request cap", f"a {cap + 1}-byte body (the default cap {cap} + 1, section 3) got no reply; "
+               "expected too_large")
+    else:
+        r = decode_reply("status", opened[0])
+        if not isinstance(r, ErrorInfo) or r.code != "too_large":
+            c.fail("request cap", f"a {cap + 1}-byte body (over the default cap {cap}, section 3) got "
+                   f"{getattr(r, 'code', 'a result')!r}; expected too_large, before any decoding")
+
+
+def _check_coordinator_left(c: Checker, bus: Bus, name: str) -> None:
+    """When the coordinator's liveliness token goes, the subsim stops serving: its own token goes too."""
+    gone = _watch_gone(bus, name)
+    try:
+        bus.withdraw_token()
+        deadline = time.monotonic() + 10.0
+        while not gone[0] and time.monotonic() < deadline:
+            time.sleep(0.05)
+        if not gone[0]:
+            c.fail("coordinator left", "the subsim's liveliness token is still there 10 s after the coordinator's "
+                   "went; it must stop serving and exit (section 3)")
+    finally:
+        gone[1].undeclare()
+
+
+def _watch_gone(bus: Bus, name: str) -> tuple[list, Any]:
+    gone: list = []
+    sub = bus.session.liveliness().declare_subscriber(
+        alive_key(bus.run, name), lambda s: gone.append(s) if str(s.kind).endswith("DELETE") else None)
+    return gone, sub
 
 
 def _check_shutdown(c: Checker, bus: Bus, name: str) -> None:

@@ -337,6 +337,21 @@ class Bus:
         return self.spawn(module, name, model=model, lease=lease, elsewhere=elsewhere,
                           **spawn_args)  # type: ignore[arg-type]
 
+    def query(self, key: str, payload: bytes, timeout: float) -> list[bytes]:
+        """The payloads of every reply (not Zenoh error replies) to one query on ``key``, as they came: for checks
+        of what a subsim answers at all (``cosim.conformance``)."""
+        replies = self.session.get(key, payload=payload, timeout=timeout, target=EVERY_QUERYABLE,
+                                   consolidation=zenoh.ConsolidationMode.NONE)
+        return [r.ok.payload.to_bytes() for r in replies if r.ok is not None]
+
+    def withdraw_token(self) -> None:
+        """Withdraw the coordinator's liveliness token (as a coordinator that leaves does): every subsim of the run
+        stops serving. ``close`` still stops the processes and closes the session."""
+        try:
+            self._token.undeclare()
+        except zenoh.ZError:  # withdrawn already
+            pass
+
     def close(self) -> None:
         """Send ``shutdown`` to attached subsims, stop every spawned process, undeclare the coordinator's
         token, then close the session (the order matters: see zenoh-notes P1)."""

@@ -401,3 +401,28 @@ def test_a_subsim_process_that_cannot_be_started_is_one_line(monkeypatch: pytest
                                               r"\[Errno 24\] Too many open files$"):
             bus.spawn("subsims.integrator", "never")
         assert bus.processes == []
+
+
+def test_a_subsim_whose_replies_carry_no_valid_tag_is_named_unauthenticated(cosim_bus: Bus) -> None:
+    """Something serves the name (its token is there) and answers every request, but with a tag for another seq (a
+    subsim in another language that seals its replies wrongly): the wait says 'unauthenticated', not that nothing
+    answers."""
+    from cosim.protocol.messages import seal_reply
+
+    key = cosim_bus.key("mis")
+    impostor = open_client(cosim_bus, zenoh_login(cosim_bus.secret, cosim_bus.run))
+
+    def answer(query: zenoh.Query) -> None:
+        with query:
+            query.reply(query.key_expr, seal_reply(key, 1, b"\x83\xa1v\x01\xa2ok\xc3\xa6result\x80"))  # seq 1: wrong
+
+    try:
+        queryable = impostor.declare_queryable(rpc_key(cosim_bus.run, "mis"), answer)
+        token = impostor.liveliness().declare_token(alive_key(cosim_bus.run, "mis"))
+        with pytest.raises(SubsimError, match=r"mis.connect: \[unauthenticated\] it answers, but none of its \d+ "
+                                              r"replies in 1.5 s carried a valid tag"):
+            cosim_bus.attach("mis", wait=1.5)
+        token.undeclare()
+        queryable.undeclare()
+    finally:
+        impostor.close()

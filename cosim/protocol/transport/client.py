@@ -200,12 +200,18 @@ class RemoteHandle(SubsimHandle):
             raise SubsimError("no_responder", f"no process appeared within {timeout:g} s (none serves run "
                                               f"{self.run!r} as {self.name!r}: check its --run and --name)",
                               self.name, "connect")
+        untagged = 0  # replies that came without a valid tag for their request
         while True:
             seq, frame = self._seal(encode_request("status"))
-            replies = self.session.get(self._key, payload=frame, timeout=1.0, target=EVERY_QUERYABLE,
-                                       consolidation=zenoh.ConsolidationMode.NONE)
-            if any(r.ok is not None and self._open(seq, r.ok.payload.to_bytes()) is not None for r in replies):
+            replies = [r for r in self.session.get(self._key, payload=frame, timeout=1.0, target=EVERY_QUERYABLE,
+                                                   consolidation=zenoh.ConsolidationMode.NONE) if r.ok is not None]
+            if any(self._open(seq, r.ok.payload.to_bytes()) is not None for r in replies):
                 return
+            untagged += len(replies)
+            if time.monotonic() > deadline and untagged:
+                raise SubsimError("unauthenticated", f"it answers, but none of its {untagged} replies in {timeout:g} s "
+                                  "carried a valid tag for its request (docs/protocol.md 4.1: the reply tag covers "
+                                  "the request's seq, with this subsim's key)", self.name, "connect")
             if time.monotonic() > deadline:  # its token is there, so it runs: a subsim drops what it cannot open
                 raise SubsimError("no_responder", f"its process is up but not answering after {timeout:g} s: "
                                   "is it running with this run's COSIM_SECRET? (a subsim silently drops requests "
