@@ -96,6 +96,11 @@ def resolve_params(declared: Mapping[str, Param], given: Mapping[str, Any]) -> d
                              "write it without quotes")
         if _finite_numbers(default) and not _finite_numbers(v, allow_other=True):  # NaN slips past `x <= 0`
             raise ValueError(f"parameter {k!r} must be finite (its default is {default!r}), got {v!r}")
+        number = isinstance(default, (int, float)) and not isinstance(default, bool)
+        if number and isinstance(v, bool):  # True is 1 to Python: m = true would run as m = 1
+            raise ValueError(f"parameter {k!r} must be a number (its default is {default!r}), got {v!r}")
+        if number and isinstance(default, int) and isinstance(v, float) and not v.is_integer():  # int() truncates
+            raise ValueError(f"parameter {k!r} must be a whole number (its default is {default!r}), got {v!r}")
     return {**{k: p.default for k, p in declared.items()}, **given}
 
 

@@ -35,6 +35,8 @@ class PhysicsError(RuntimeError):
 
 # --- fixed-step RK4 ------------------------------------------------------------------------------------------
 
+MAX_STEPS = 1_000_000  # sub-steps one rk4 call may take: seconds of Python for these models
+
 
 def substeps(times: np.ndarray, h_max: float) -> np.ndarray:
     """Per sample interval, the number of equal sub-steps of at most ``h_max`` (1e-9 slack: 0.1 / 0.01 is 10)."""
@@ -51,6 +53,10 @@ def rk4_times(times: np.ndarray, steps: int | np.ndarray = 1, h: float | None = 
     start, midpoint, ..., end of the last (S sub-steps in all) and ``hs`` (S,).
     """
     t = np.asarray(times, dtype=np.float64)
+    total = (t.size - 1) * int(steps) if isinstance(steps, (int, np.integer)) else int(np.sum(steps))
+    if total > MAX_STEPS:  # one request must not hold its process for minutes (or ask for gigabytes of times)
+        raise PhysicsError(f"{total} RK4 steps asked for in one call ({t.size} samples); at most {MAX_STEPS}: "
+                           "fewer samples or steps per sample (idiv)")
     if h is None and isinstance(steps, int) and steps == 1:  # the common case, in a few array operations
         hs = t[1:] - t[:-1]
         starts = t[:-1]

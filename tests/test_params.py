@@ -106,3 +106,32 @@ def test_a_key_error_in_initial_state_is_a_bad_parameter_with_the_models_frames(
     assert err.value.code == "bad_value"
     assert err.value.message == "configure: bad parameter (or a bug in initial_state()): KeyError: 'Gain'"
     assert 'params["Gain"]' in err.value.traceback and "in initial_state" in err.value.traceback
+
+
+@pytest.mark.parametrize(("given", "says"), [
+    ({"m": True}, "parameter 'm' must be a number (its default is 1.0), got True"),
+    ({"k": False}, "parameter 'k' must be a number"),
+    ({"idiv": 1.5}, "parameter 'idiv' must be a whole number (its default is 1), got 1.5"),
+    ({"idiv": True}, "parameter 'idiv' must be a number (its default is 1), got True"),
+])
+def test_a_boolean_for_a_number_or_a_fraction_for_a_count_is_refused(given: dict, says: str) -> None:
+    """true is 1 to Python and int(1.5) is 1: m = true ran as m = 1 and idiv = 1.5 as 1, silently."""
+    h = InProcessHandle(Mass())
+    h.configure({"m": 2.0})
+    with pytest.raises(SubsimError) as err:
+        h.configure(given)
+    assert err.value.code == "bad_value" and says in err.value.message
+    assert h.runtime.model.m == 2.0  # the old configuration stays
+    h.configure({"idiv": 2.0})  # a whole number written as a float is one
+    assert h.runtime.model.idiv == 2
+
+
+def test_a_request_for_more_rk4_steps_than_a_call_may_take_is_a_model_error_at_once() -> None:
+    """idiv = 10**7 held the oscillator's serving thread for 38 s on a 2-sample request, status unanswered."""
+    h = InProcessHandle(Mass())
+    h.configure({"idiv": 10**7})
+    with pytest.raises(SubsimError) as err:
+        h.run_interval(np.array([0.0, 0.1]), {"F": np.zeros((2, 1))})
+    assert err.value.code == "model_error" and "10000000 RK4 steps asked for in one call" in err.value.message
+    h.configure({"idiv": 1000})
+    assert h.run_interval(np.array([0.0, 0.1]), {"F": np.zeros((2, 1))}).end_time == 0.1

@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 
 from cosim.subsim import InputFunction, Param, Port, Subsim
+from subsims.adapters import reports_physics_errors
 from subsims.oscillator.model import integrate
 
 
@@ -35,6 +36,7 @@ class Mass(Subsim):
             raise ValueError(f"{', '.join(bad)} must be finite numbers")
         return state
 
+    @reports_physics_errors
     def advance(self, state: np.ndarray, times: np.ndarray, u: InputFunction):
         x = integrate(state, times, lambda ts: u(ts)["F"], self.m, self.k, self.idiv)
         return {"u": x[:, :1], "v": x[:, 1:]}, x[-1]
