@@ -17,7 +17,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from cosim.contract import PROTOCOL_VERSION, CosimError
-from cosim.signals import SCHEMES, SegmentError, check_time_grid, interpolant
+from cosim.signals import SegmentError, check_scheme, check_time_grid, interpolant
 from cosim.subsim import ModelError, Port, Subsim, as_ports, resolve_params
 
 DEFAULT_HISTORY = 32
@@ -189,8 +189,10 @@ class Runtime:
         if times[0] != t0 or (t0 == 0.0 and math.copysign(1.0, times[0]) != math.copysign(1.0, t0)):  # -0.0 != 0.0
             start, what = float(times[0]), "the trial to commit ends" if commit else "the committed time is"
             raise CosimError("time_mismatch", f"interval starts at t={start!r} but {what} {t0!r}")
-        if interp not in SCHEMES:
-            raise CosimError("bad_value", f"interp: unknown scheme {interp!r}; known: {', '.join(SCHEMES)}")
+        try:
+            check_scheme(interp, times.size)
+        except ValueError as exc:
+            raise CosimError("bad_value", f"interp: {exc}") from None
         u = self._input_function(times, inputs, interp)
         try:
             result = self.model.advance(state, times, u)

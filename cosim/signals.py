@@ -18,6 +18,17 @@ import numpy as np
 
 # scheme name -> polynomial degree it reproduces exactly (None: n-1 for n samples)
 SCHEMES: dict[str, int | None] = {"linear": 1, "cubic": 3, "lagrange": None}
+LAGRANGE_MAX_SAMPLES = 64  # one polynomial through all samples: past ~450 its weights leave float64's range
+
+
+def check_scheme(scheme: str, samples: int) -> None:
+    """ValueError in one line unless ``scheme`` can interpolate ``samples`` samples."""
+    if scheme not in SCHEMES:
+        raise ValueError(f"unknown interpolation scheme {scheme!r}; known: {', '.join(SCHEMES)}")
+    if scheme == "lagrange" and samples > LAGRANGE_MAX_SAMPLES:
+        raise ValueError(f"'lagrange' puts one polynomial of degree n - 1 through all n = {samples} samples; at most "
+                         f"{LAGRANGE_MAX_SAMPLES} (higher degrees oscillate, and their weights leave float64's range): "
+                         "use 'cubic'")
 
 Interpolant = Callable[[float | np.ndarray], np.ndarray]  # t -> (m,); times (k,) -> (k, m)
 

@@ -361,3 +361,26 @@ def test_the_kept_weights_stay_bounded() -> None:
     for i in range(3 * signals.KEPT_WEIGHTS_MAX):
         interpolant(grid + i, np.ones((5, 2)), "linear")(ts + i)
         assert len(signals._KEPT_WEIGHTS) <= signals.KEPT_WEIGHTS_MAX
+
+
+def test_lagrange_through_too_many_samples_is_refused_where_it_would_give_nan() -> None:
+    """One polynomial through 500 samples: its weights underflowed and a constant input came out NaN (after 37 s
+    at 10,000 samples). The runtime refuses it as bad_value, and a scenario's settings refuse it at load."""
+    from cosim.contract import SubsimError
+    from cosim.coupler.relaxation import Settings
+    from cosim.handles import InProcessHandle
+    from cosim.signals import LAGRANGE_MAX_SAMPLES
+    from subsims.integrator.subsim import Integrator
+
+    h = InProcessHandle(Integrator())
+    h.configure({})
+    n = LAGRANGE_MAX_SAMPLES
+    t = np.linspace(0.0, 0.1, n)
+    y = h.run_interval(t, {"u": np.ones((n, 1))}, interp="lagrange").outputs["y"]
+    assert np.isfinite(y).all() and abs(y[-1, 0] - 0.1) < 1e-12
+    t = np.linspace(0.0, 0.1, n + 1)
+    with pytest.raises(SubsimError, match=r"\[bad_value\] interp: 'lagrange' puts one polynomial .* n = 65 samples; "
+                                          r"at most 64 .*use 'cubic'"):
+        h.run_interval(t, {"u": np.ones((n + 1, 1))}, interp="lagrange")
+    with pytest.raises(ValueError, match="at most 64"):
+        Settings(interval=0.1, samples=65, interp="lagrange")

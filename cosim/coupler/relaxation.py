@@ -49,7 +49,7 @@ from cosim.coupler.interval_control import (
     retry_length,
 )
 from cosim.coupler.plan import Plan
-from cosim.signals import SCHEMES
+from cosim.signals import SCHEMES, check_scheme
 
 METHODS = ("centralized", "distributed")
 RETRY_MISSED = 32  # interval tries after a speculation missed before it is tried again at that level and stage
@@ -92,6 +92,7 @@ class Settings:
             raise ValueError(f"first_guess must be one of {', '.join(POLICIES)}, got {self.first_guess!r}")
         if self.interp not in SCHEMES:
             raise ValueError(f"interp must be one of {', '.join(SCHEMES)}, got {self.interp!r}")
+        check_scheme(self.interp, self.samples)
         if not _whole(self.max_stages, 2):
             raise ValueError(f"max_stages must be an integer >= 2, got {self.max_stages!r}")
         if not _whole(self.max_halvings, 0):
