@@ -226,7 +226,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "(default: the scenario's [run] restarts, 2; 0 stops the run at the first failure)")
     r.add_argument("--timeout", type=float, metavar="SECONDS",
                    help="wait this long for a reply before a subsim counts as hung (default: derived from the "
-                        "measured request times, at least 1.5 s)")
+                        "measured request times, at least 1.5 s, or 10 s with a subsim on another machine)")
     r.add_argument("--tls-cert", type=Path, help="router certificate (PEM); listen on tls/<host>:<port> (see "
                    "docs/reliability.md)")
     r.add_argument("--tls-key", type=Path, help="private key of --tls-cert (PEM)")

@@ -33,7 +33,7 @@ from typing import Any
 import msgpack
 import numpy as np
 
-from cosim.contract import ERROR_CODES, PROTOCOL_VERSION, ProtocolError, SubsimError
+from cosim.contract import COORDINATOR_SIDE, ERROR_CODES, PROTOCOL_VERSION, ProtocolError, SubsimError
 from cosim.launch import Bus
 from cosim.protocol.keys import alive_key, check_name, rpc_key
 from cosim.protocol.messages import (
@@ -101,7 +101,7 @@ class Checker:
             return
         if r.code not in codes:
             self.fail(check, f"error code {r.code!r}, expected {' or '.join(sorted(codes))} ({r.message})")
-        if r.code not in ERROR_CODES or r.code in ("timeout", "no_responder"):
+        if r.code not in ERROR_CODES or r.code in COORDINATOR_SIDE:
             self.fail(check, f"{r.code!r} is not an error code a subsim may send")
         if r.subsim != self.name:
             self.fail(check, f"error.subsim is {r.subsim!r}, expected {self.name!r}")
@@ -378,9 +378,9 @@ def _check_seals(c: Checker, bus: Bus, name: str, wait: float = 1.0) -> None:
     other key expressions get no reply at all; a body over the default request cap gets ``too_large``."""
     key, rpc = bus.key(name), rpc_key(bus.run, name)
 
-    def replies(payload: bytes, on: str = rpc) -> list[bytes]:
+    def replies(payload: bytes, on: str = rpc, timeout: float = wait) -> list[bytes]:
         c.checks += 1
-        return bus.query(on, payload, wait)
+        return bus.query(on, payload, timeout)
 
     status = encode_request("status")
     silent = {
@@ -394,7 +394,7 @@ def _check_seals(c: Checker, bus: Bus, name: str, wait: float = 1.0) -> None:
             c.fail("seal", f"{what} was answered; it must get no reply (section 4.1)")
     seq = next_seq()
     frame = seal_request(key, seq, status)
-    if not any(open_reply(key, seq, r) is not None for r in replies(frame)):
+    if not any(open_reply(key, seq, r) is not None for r in replies(frame, timeout=30.0)):
         c.fail("seal", "a correctly sealed status got no reply with a valid tag")
     elif replies(frame):
         c.fail("seal", "a replayed frame (the same seq again) was answered; it must get no reply (section 4.1)")
@@ -404,7 +404,7 @@ def _check_seals(c: Checker, bus: Bus, name: str, wait: float = 1.0) -> None:
     ports = {p: SimpleNamespace(size=v["size"]) for p, v in (c.description or {}).get("inputs", {}).items()}
     cap = default_request_cap(ports)  # type: ignore[arg-type]
     seq = next_seq()
-    answer = [open_reply(key, seq, r) for r in replies(seal_request(key, seq, b"\x00" * (cap + 1)))]
+    answer = [open_reply(key, seq, r) for r in replies(seal_request(key, seq, b"\x00" * (cap + 1)), timeout=30.0)]
     opened = [bytes(a) for a in answer if a is not None]
     if not opened:
         c.fail("request cap", f"a {cap + 1}-byte body (the default cap {cap} + 1, section 3) got no reply; "

@@ -32,7 +32,9 @@ ERROR_CODES: dict[str, str] = {
     "timeout": "no reply within the caller's timeout (raised coordinator-side)",
     "no_responder": "nobody serves this subsim's key, or the process died mid-request (coordinator-side)",
     "unauthenticated": "no reply carried this subsim's tag for the request (coordinator-side)",
+    "duplicate": "a second process answers as this subsim: one started twice (coordinator-side)",
 }
+COORDINATOR_SIDE = frozenset({"timeout", "no_responder", "unauthenticated", "duplicate"})  # no subsim sends these
 
 
 class CosimError(Exception):

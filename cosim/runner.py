@@ -19,7 +19,7 @@ from cosim.coupler.plan import Plan
 from cosim.coupler.relaxation import Interval, RunSummary
 from cosim.driver import Coordinator, Deadline, Recovery, plan_for
 from cosim.handles import Description, InProcessHandle, SubsimHandle
-from cosim.launch import PRIVATE, Bus, Elsewhere, endpoint_for
+from cosim.launch import PRIVATE, UNSPECIFIED_HOSTS, Bus, Elsewhere, endpoint_for
 from cosim.outputs import OutputError, reserve_output, resume_path
 from cosim.progress import Progress
 from cosim.protocol.security import Security
@@ -79,7 +79,8 @@ class Session:
         spec = self.scenario.subsims[name]
         if spec.external:  # nothing else is printed until it is back: say what is awaited, and from whom
             self.log(f"cosim: external subsim {name!r} is gone; waiting up to {self.external_wait:g} s for it to "
-                     "attach again (start it with the same command and the same two variables)")
+                     "attach again (start it with the same command and the same two variables, once the old process "
+                     "has exited: two copies answering as one stop the run)")
             handle: SubsimHandle = self.bus.attach(name, timeout=self.timeout, wait=self.external_wait)
         else:
             handle = self.bus.respawn(name, timeout=self.timeout).handle
@@ -142,16 +143,15 @@ def open_session(
         if bus is not None:
             for name, spec in scenario.subsims.items():
                 if spec.external:
-                    cmd = bus.command("<your.subsim.module>", name, spec.model)
+                    endpoint, hint = attach_endpoint(listen, bus.endpoint)
+                    cmd = bus.command("<your.subsim.module>", name, spec.model,
+                                      elsewhere=Elsewhere((), python="python", connect=endpoint))
                     env = " ".join(f"{k}={v}" for k, v in bus.subsim_env(name).items())
-                    log("cosim-attach " + json.dumps({"endpoint": bus.endpoint, "run": bus.run, "name": name,
-                                                      "command": ["python", *cmd[1:]],
-                                                      "env": bus.subsim_env(name)}))
+                    log("cosim-attach " + json.dumps({"endpoint": endpoint, "run": bus.run, "name": name,
+                                                      "command": cmd, "env": bus.subsim_env(name)}))
                     log(f"cosim: waiting up to {external_wait:g} s for external subsim {name!r}; start it with:\n"
-                        f"  {env} {' '.join(['python', *cmd[1:]])}\n"
-                        f"  (the two variables are this subsim's secrets: hand them over privately)\n"
-                        f"  (from another machine: run cosim with --listen tcp/0.0.0.0:<port> and use this "
-                        f"machine's address)")
+                        f"  {env} {' '.join(cmd)}\n"
+                        f"  (the two variables are this subsim's secrets: hand them over privately)\n  ({hint})")
                     handles[name] = bus.attach(name, timeout=timeout, wait=external_wait)
                 else:
                     process = bus.spawn("", name, timeout=timeout, model=spec.model, lease=scenario.run.lease,
@@ -174,6 +174,25 @@ def open_session(
         session.close()
         raise
     return session
+
+
+AWAY_FLOOR = 10.0  # s: the shortest automatic deadline when a subsim is on another machine (a Zenoh lease: a
+# network blip shorter than that is waited out, not taken for a hang that costs a restart)
+
+
+def attach_endpoint(listen: str | None, endpoint: str) -> tuple[str, str]:
+    """The endpoint an external subsim is told, and a hint on reaching it from another machine. A router listening
+    on every address (0.0.0.0) is reached at one this machine cannot name for the other: a placeholder then."""
+    proto, _, address = (listen or endpoint).partition("/")
+    host = address.rsplit(":", 1)[0]
+    port = endpoint.rsplit(":", 1)[-1]
+    if host in UNSPECIFIED_HOSTS:
+        return (f"{proto}/<this machine's address>:{port}",
+                "replace <this machine's address> by an address of this machine the subsim's machine reaches")
+    if host in ("127.0.0.1", "localhost", "[::1]", "::1"):
+        return endpoint, (f"from another machine: run cosim with --listen {proto}/<an address of this machine>:<port> "
+                          "(or 0.0.0.0 for every address) and give the subsim that address")
+    return endpoint, "from another machine: the same command, on a machine that reaches this address"
 
 
 def elsewhere(spec: SubsimSpec) -> Elsewhere | None:
@@ -316,7 +335,9 @@ def run_scenario(
         recovery = None
         if restarts and not inprocess:
             recovery = Recovery(session.revive, restarts, spec.checkpoint_every, log)
-        deadline = Deadline(fixed=timeout if timeout is not None else spec.timeout)
+        away = any(sub.external or sub.launcher for sub in scenario.subsims.values())
+        deadline = Deadline(fixed=timeout if timeout is not None else spec.timeout,
+                            floor=AWAY_FLOOR if away else Deadline.floor)
         checkpoints: list[Saved] = []  # taken, their intervals not yet written
         coordinator = Coordinator(session.handles, session.plans[method], settings, recovery=recovery,
                                   deadline=deadline, checkpoint_every=spec.checkpoint_every,

@@ -124,7 +124,8 @@ KEYS: dict[str, dict[str, Key]] = {
     "run": {
         "restarts": Key("integer", "2", "", "replacements of subsims that die or hang before the run fails (0: fail)"),
         "timeout": Key("number", "auto", "s", "wait for a reply before a subsim counts as hung; auto: the largest of "
-                       "1.5 s, 50 times the median and 3 times the slowest recent request (30 s for the first few)"),
+                       "1.5 s (10 s when a subsim is external or has a launcher: network blips), 50 times the median "
+                       "and 3 times the slowest recent request (30 s for the first few)"),
         "checkpoint_every": Key("integer", "200", "", "intervals between checkpoints of every subsim's state (for "
                                 "replacements, and the resume points of `cosim run --resume`)"),
         "lease": Key("number", "10", "s", "Zenoh link lease of launched subsims: how long a silent link lives"),

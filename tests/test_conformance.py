@@ -173,7 +173,7 @@ def test_the_seal_checks_fail_a_subsim_that_answers_every_frame(cosim_bus) -> No
         queryable = lax.declare_queryable(rpc_key(cosim_bus.run, "lax"), respond)
         c = Checker(lambda payload: None, "lax")
         c.description = runtime.describe()
-        _check_seals(c, cosim_bus, "lax", wait=0.5)
+        _check_seals(c, cosim_bus, "lax", wait=3.0)  # each of them is answered, however loaded the machine
         queryable.undeclare()
     finally:
         lax.close()

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from cosim.contract import SubsimDied, SubsimError
-from cosim.launch import Bus, subsim_command
+from cosim.launch import Bus, subsim_command, terminate
 
 TIMES = np.linspace(0.0, 0.4, 5)
 
@@ -167,3 +167,21 @@ def test_spawn_subsim_names_a_target_it_cannot_import(spawn_subsim) -> None:
         spawn_subsim("no_such_module:Thing")
     with pytest.raises(ValueError, match=r"spawn_subsim\('subsims.no_such'\): no module named 'subsims.no_such'"):
         spawn_subsim("subsims.no_such")
+
+
+def test_a_second_copy_started_by_hand_is_named_not_taken_for_the_first(cosim_bus: Bus) -> None:
+    """An external subsim started twice with the same command: both hold its key, both answer. The run stopped at
+    once with 'not_configured' from the copy (the operator's restart after a blip); the coordinator now believes
+    only the process that first answered and names the other."""
+    first = cosim_bus.spawn("subsims.integrator", "twin")
+    first.handle.configure({})
+    copy = subprocess.Popen(subsim_command("subsims.integrator", cosim_bus.endpoint, cosim_bus.run, "twin"),
+                            env={**os.environ, **cosim_bus.subsim_env("twin")}, stderr=subprocess.DEVNULL)
+    try:
+        t = np.array([0.0, 0.5])
+        with pytest.raises(SubsimError) as err:
+            for _ in range(2000):  # until the copy's reply comes first
+                first.handle.run_interval(t, {"u": np.ones((2, 1))})
+        assert err.value.code == "duplicate" and "a second process answers as 'twin'" in str(err.value)
+    finally:
+        terminate(copy)

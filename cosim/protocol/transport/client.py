@@ -142,6 +142,7 @@ class RemoteHandle(SubsimHandle):
         self.timeout = timeout
         self.deadline: float | None = None
         self.hung = False  # a request missed its deadline: the process is stuck or stopped (its stop need not ask)
+        self._server: Any = None  # the Zenoh id of the process that answers (its first valid reply's)
         self._in_flight: set[_Pending] = set()
         # A declared querier costs about 35 us less per request than session.get; its timeout is fixed at
         # declaration. Zenoh keeps a task of about 1.1 KB per query for the query's whole timeout, however soon
@@ -205,8 +206,10 @@ class RemoteHandle(SubsimHandle):
             seq, frame = self._seal(encode_request("status"))
             replies = [r for r in self.session.get(self._key, payload=frame, timeout=1.0, target=EVERY_QUERYABLE,
                                                    consolidation=zenoh.ConsolidationMode.NONE) if r.ok is not None]
-            if any(self._open(seq, r.ok.payload.to_bytes()) is not None for r in replies):
-                return
+            for r in replies:
+                if self._open(seq, r.ok.payload.to_bytes()) is not None:
+                    self._server = self._server or r.replier_id.zid
+                    return
             untagged += len(replies)
             if time.monotonic() > deadline and untagged:
                 raise SubsimError("unauthenticated", f"it answers, but none of its {untagged} replies in {timeout:g} s "
@@ -265,6 +268,13 @@ class RemoteHandle(SubsimHandle):
                 if body is None:  # not sealed with this subsim's key for this request: not from our subsim
                     forged += 1
                     continue
+                server = reply.replier_id.zid
+                if self._server is None:
+                    self._server = server
+                elif server != self._server:  # sealed with its key: a second copy of this subsim, started by hand
+                    raise SubsimError("duplicate", f"a second process answers as {self.name!r} (Zenoh id {server}, "
+                                      f"besides {self._server}): it was started twice; stop the copy that was "
+                                      "started last and run again (or --resume)", self.name, cmd)
                 try:
                     result = decode_reply(cmd, body)
                 except ProtocolError as exc:
