@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import os
 import signal
+import socket
 import threading
 import time
 from collections.abc import Sequence
@@ -26,7 +27,7 @@ from cosim.console import say
 from cosim.protocol.keys import check_name
 from cosim.protocol.security import SECRET_ENV, ZENOH_AUTH_ENV, ClientSecurity
 from cosim.protocol.transport.server import CommandServer
-from cosim.protocol.transport.session import client_config
+from cosim.protocol.transport.session import client_config, error_text
 from cosim.runtime import DEFAULT_HISTORY, Runtime
 from cosim.subsim import Subsim
 
@@ -99,6 +100,7 @@ def parse_args(model_cls: type[Subsim] | Subsim, argv: Sequence[str] | None,
         args.security = ClientSecurity.from_env(None, args.auth_file, args.tls_ca, args.tls_cert, args.tls_key)
         for name in (SECRET_ENV, ZENOH_AUTH_ENV):  # read once; processes this one starts do not inherit them
             os.environ.pop(name, None)
+        _check_login_names(args.security.login, args.run, args.name)
     except ValueError as exc:
         p.error(str(exc))
     if args.max_request is not None and args.max_request < 1:
@@ -106,6 +108,38 @@ def parse_args(model_cls: type[Subsim] | Subsim, argv: Sequence[str] | None,
     if args.queue < 1:
         p.error("--queue must be at least 1")
     return args
+
+
+def unreachable(endpoint: str, timeout: float) -> tuple[str | None, bool]:
+    """(why nothing can be reached at a ``tcp/`` or ``tls/`` endpoint, found at once: a name that does not resolve,
+    a refused or unroutable connection; whether a TCP connection opened). No reason when a connection opens,
+    times out (a slow link: Zenoh goes on trying) or the endpoint is of another kind."""
+    proto, _, address = endpoint.partition("/")
+    host, _, port = address.partition("#")[0].rpartition(":")
+    host = host.strip("[]")
+    if proto not in ("tcp", "tls") or not host or not port.isdigit():
+        return None, True
+    try:
+        with socket.create_connection((host, int(port)), timeout=timeout):
+            return None, True
+    except socket.gaierror as exc:
+        return f"cannot resolve {host!r} ({exc.strerror})", False
+    except ConnectionRefusedError:
+        return (f"nothing listens on port {port} of {host} (connection refused): is the coordinator running, and "
+                "is this the address and port it printed?"), False
+    except TimeoutError:
+        return None, False
+    except OSError as exc:
+        return f"{host}:{port} cannot be reached ({exc.strerror or exc})", False
+
+
+def _check_login_names(login: tuple[str, str] | None, run: str, name: str) -> None:
+    """A run's own logins are ``cosim-<run>`` and ``cosim-<run>.<name>``: one made for another run or subsim would
+    connect and then be refused its keys in silence (the router's access control), so say it here."""
+    if login is None or not login[0].startswith("cosim-") or login[0] in (f"cosim-{run}", f"cosim-{run}.{name}"):
+        return  # a site login (--auth-file), or this run's
+    raise ValueError(f"${ZENOH_AUTH_ENV} is the login {login[0]!r}, made for another run or subsim than --run {run} "
+                     f"--name {name}: start it with the run id and name the coordinator printed with it")
 
 
 def _watch_router(session: zenoh.Session, grace: float = 2.0) -> None:
@@ -138,11 +172,18 @@ def main(model_cls: type[Subsim] | Subsim, argv: Sequence[str] | None = None, pr
                 runtime.on_model_error = lambda cmd, exc: say(
                     f"{args.name}: {cmd} failed: [{exc.code}] {exc.message}"
                     + (f"\n{exc.traceback.rstrip()}" if exc.traceback else ""))
+            why, connected = unreachable(args.connect, min(2.0, args.connect_timeout))
+            if why is not None:  # said at once: zenoh would retry until --connect-timeout, then say less
+                say(f"{args.name}: cannot reach the coordinator at {args.connect}: {why}")
+                return 2
             session = zenoh.open(client_config(args.connect, args.connect_timeout, int(args.lease * 1000),
                                               security=args.security))
         except zenoh.ZError as exc:
+            cause = ("something listens there, but its login/TLS refused ours, or it is not a cosim router: check "
+                     f"${ZENOH_AUTH_ENV}/--auth-file, tls/ against tcp/ and --tls-ca" if connected else
+                     "no answer from that address: a firewall, no route, or the wrong address?")
             say(f"{args.name}: cannot reach the coordinator at {args.connect} within {args.connect_timeout:g} s "
-                 f"(or its login/TLS refused ours: check ${ZENOH_AUTH_ENV}/--auth-file and --tls-ca) ({exc})")
+                f"({cause}) ({error_text(exc)})")
             return 2
     except _Stop as why:  # also one that arrived while zenoh.open held it, raised in the handler above
         if not args.quiet_stop:
@@ -154,6 +195,8 @@ def main(model_cls: type[Subsim] | Subsim, argv: Sequence[str] | None = None, pr
             server = CommandServer(
                 session, args.run, runtime, on_coordinator_lost=lambda: _stop_self("as the coordinator left"),
                 key=args.security.key, max_request=args.max_request, queue_size=args.queue,
+                on_never_sealed=lambda: say(f"{args.name}: requests arrive, but none is sealed with our key: is "
+                                            f"{SECRET_ENV} the one the coordinator printed for run {args.run}?"),
             )
             threading.Thread(target=_watch_router, args=(session,), daemon=True, name="router-watch").start()
             say(f"{args.name}: serving run {args.run} via {args.connect} (pid {os.getpid()})")

@@ -95,12 +95,59 @@ def _unused_port() -> int:
         return s.getsockname()[1]
 
 
-def test_unreachable_endpoint_exits_with_a_clear_message() -> None:
-    cmd = subsim_command("subsims.integrator", f"tcp/127.0.0.1:{_unused_port()}", "run-x", "lonely")
+@pytest.mark.parametrize(("host", "says"), [
+    ("127.0.0.1", "(connection refused): is the coordinator running, and is this the address and port it printed?"),
+    ("no-such-host.invalid", "cannot resolve 'no-such-host.invalid'"),
+])
+def test_unreachable_endpoint_exits_with_a_clear_message_at_once(host: str, says: str) -> None:
+    """A closed port or a name that does not resolve is said at once, not after --connect-timeout as one line for
+    every cause."""
+    port = _unused_port()
+    cmd = subsim_command("subsims.integrator", f"tcp/{host}:{port}", "run-x", "lonely")
     env = {**os.environ, "COSIM_SECRET": "00" * 32}
-    done = subprocess.run([*cmd, "--connect-timeout", "0.5"], capture_output=True, text=True, timeout=30, env=env)
-    assert done.returncode == 2
-    assert "cannot reach the coordinator" in done.stderr and "lonely" in done.stderr
+    started = time.monotonic()
+    done = subprocess.run([*cmd, "--connect-timeout", "20"], capture_output=True, text=True, timeout=30, env=env)
+    assert done.returncode == 2 and time.monotonic() - started < 10
+    assert f"lonely: cannot reach the coordinator at tcp/{host}:{port}: " in done.stderr and says in done.stderr
+
+
+def test_a_login_made_for_another_run_or_name_is_refused_at_start() -> None:
+    """--run or --name mistyped: the login still connects, then the router refuses its keys in silence and the
+    process waited forever; it now says so and exits."""
+    bus = Bus.open(names=["a", "b"])
+    try:
+        cmd = subsim_command("subsims.integrator", bus.endpoint, bus.run, "b")  # given a's login
+        env = {**os.environ, **bus.subsim_env("a")}
+        done = subprocess.run(cmd, capture_output=True, text=True, timeout=30, env=env)
+        assert done.returncode == 2
+        assert f"is the login 'cosim-{bus.run}.a', made for another run or subsim than --run {bus.run} --name b" \
+            in done.stderr, done.stderr
+    finally:
+        bus.close()
+
+
+@pytest.mark.slow
+def test_a_subsim_with_another_runs_key_is_given_up_on_early_and_says_so_itself() -> None:
+    """Started with the right login but another run's COSIM_SECRET: it connects and drops every request. The
+    coordinator gave up only at the end of the attach wait (300 s by default); now after 15 s of silence, and
+    the subsim says on its own terminal why nothing reaches it."""
+    from cosim.protocol.transport.client import SILENT_LIMIT
+
+    with Bus.open(names=["keyless"]) as bus:
+        env = {**os.environ, **bus.subsim_env("keyless"), "COSIM_SECRET": "ab" * 32}
+        proc = subprocess.Popen(subsim_command("subsims.integrator", bus.endpoint, bus.run, "keyless"), env=env,
+                                stderr=subprocess.PIPE, text=True)
+        try:
+            started = time.monotonic()
+            with pytest.raises(SubsimError, match=r"has not answered in 1\d s: is it running with this run's "
+                                                  "COSIM_SECRET"):
+                bus.attach("keyless", wait=120)
+            assert time.monotonic() - started < SILENT_LIMIT + 10
+        finally:
+            terminate(proc)
+        err = proc.stderr.read()
+        assert "requests arrive, but none is sealed with our key: is COSIM_SECRET the one the coordinator printed" \
+            in err, err
 
 
 def test_bad_command_line_is_rejected() -> None:

@@ -18,6 +18,7 @@ from cosim.protocol.messages import ErrorInfo, decode_reply, encode_request, nex
 
 FAST_QUERY_TIMEOUT = 4.0  # seconds: zenoh's own timeout of requests whose deadline is at most half of it
 GONE_GRACE = 0.3  # seconds a request may still be answered after its subsim's liveliness token went
+SILENT_LIMIT = 15.0  # seconds a serving process (its token there, past a cut link's 10 s lease) may leave us unanswered
 # Every queryable on a subsim's key gets its requests (not only the best match): another login holder's queryable
 # declared there as complete would otherwise take them all and black-hole the subsim (its replies are forged anyway).
 EVERY_QUERYABLE = zenoh.QueryTarget.ALL
@@ -195,14 +196,18 @@ class RemoteHandle(SubsimHandle):
         return self._alive.wait(timeout)
 
     def wait_ready(self, timeout: float = 10.0) -> None:
-        """Wait for the liveliness token and a first answered ``status`` (declarations propagate late)."""
+        """Wait for the liveliness token and a first answered ``status`` (declarations propagate late). A process
+        whose token has been there for :data:`SILENT_LIMIT` seconds without one valid reply is given up on then,
+        not at the end of a long ``timeout``: it runs, but drops our requests (another run's key)."""
         deadline = time.monotonic() + timeout
-        if not self.wait_alive(timeout):
-            raise SubsimError("no_responder", f"no process appeared within {timeout:g} s (none serves run "
-                                              f"{self.run!r} as {self.name!r}: check its --run and --name)",
-                              self.name, "connect")
-        untagged = 0  # replies that came without a valid tag for their request
+        untagged, silent_since = 0, None  # replies without a valid tag; since when the token is there, unanswered
         while True:
+            if not self._alive.is_set():  # not yet there, or gone again (a cut link outlived its lease)
+                if not self.wait_alive(max(deadline - time.monotonic(), 0.0)):
+                    raise SubsimError("no_responder", f"no process appeared within {timeout:g} s (none serves run "
+                                                      f"{self.run!r} as {self.name!r}: check its --run and --name)",
+                                      self.name, "connect")
+                silent_since = time.monotonic()
             seq, frame = self._seal(encode_request("status"))
             replies = [r for r in self.session.get(self._key, payload=frame, timeout=1.0, target=EVERY_QUERYABLE,
                                                    consolidation=zenoh.ConsolidationMode.NONE) if r.ok is not None]
@@ -211,14 +216,16 @@ class RemoteHandle(SubsimHandle):
                     self._server = self._server or r.replier_id.zid
                     return
             untagged += len(replies)
-            if time.monotonic() > deadline and untagged:
-                raise SubsimError("unauthenticated", f"it answers, but none of its {untagged} replies in {timeout:g} s "
-                                  "carried a valid tag for its request (docs/protocol.md 4.1: the reply tag covers "
-                                  "the request's seq, with this subsim's key)", self.name, "connect")
-            if time.monotonic() > deadline:  # its token is there, so it runs: a subsim drops what it cannot open
-                raise SubsimError("no_responder", f"its process is up but not answering after {timeout:g} s: "
-                                  "is it running with this run's COSIM_SECRET? (a subsim silently drops requests "
-                                  "sealed with another key)", self.name, "connect")
+            now = time.monotonic()
+            silent = now - (silent_since or now)
+            if (now > deadline or silent > SILENT_LIMIT) and untagged:
+                raise SubsimError("unauthenticated", f"it answers, but none of its {untagged} replies in "
+                                  f"{silent:.0f} s carried a valid tag for its request (docs/protocol.md 4.1: the "
+                                  "reply tag covers the request's seq, with this subsim's key)", self.name, "connect")
+            if now > deadline or silent > SILENT_LIMIT:  # its token is there, so it runs: it drops what it cannot open
+                raise SubsimError("no_responder", f"its process is up but has not answered in {silent:.0f} s: is it "
+                                  "running with this run's COSIM_SECRET? (a subsim silently drops requests sealed "
+                                  "with another key)", self.name, "connect")
             time.sleep(0.01)
 
     def _begin(self, cmd: str, args: dict[str, Any]) -> Callable[[], dict]:

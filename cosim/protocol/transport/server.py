@@ -32,6 +32,7 @@ from cosim.runtime import Runtime
 log = logging.getLogger(__name__)
 
 DEFAULT_QUEUE = 64
+NEVER_SEALED = 3  # requests dropped for their seal, none admitted yet: tell the operator once (a wrong key?)
 
 
 # Answered where they arrive when the subsim is idle: bookkeeping only, no model run. (configure builds a
@@ -53,10 +54,12 @@ class CommandServer:
         max_request: int | None = None,
         queue_size: int = DEFAULT_QUEUE,
         inline_limit: float = INLINE_LIMIT,
+        on_never_sealed: Callable[[], None] | None = None,
     ) -> None:
         self.runtime = runtime
         self.gate = Gate(runtime, key, max_request)
         self._on_lost = on_coordinator_lost
+        self._on_never_sealed = on_never_sealed  # called once: requests come, none ever sealed with our key
         self._rpc = rpc_key(run, runtime.name)
         # requests waiting for the serving thread; ``_busy``: a request is being answered (on either thread).
         # Both change under ``_ready``'s lock, so a request is answered inline only when none came before it.
@@ -86,6 +89,11 @@ class CommandServer:
                 return
             payload = query.payload
             admitted, reply = self.gate.admit(payload.to_bytes() if payload is not None else b"")
+            counts = self.gate.counts
+            if admitted is None and self._on_never_sealed is not None and counts["dropped"] >= NEVER_SEALED \
+                    and not counts["admitted"]:  # e.g. started with another run's COSIM_SECRET
+                notice, self._on_never_sealed = self._on_never_sealed, None
+                notice()
             if admitted is not None:
                 cmd = peek_command(admitted.body)
                 quick = cmd in QUICK_COMMANDS or (cmd == "run_interval" and self._last_run <= self.inline_limit)
