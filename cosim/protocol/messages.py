@@ -182,6 +182,8 @@ def decode_request(payload: bytes) -> Request:
         msg = unpack_map(payload, unique_keys=True)
         _check_version(msg)
         cmd = msg.get("cmd")
+        if cmd is None:
+            raise ProtocolError("bad_request", "field 'cmd' is missing: every request names its command")
         if not isinstance(cmd, str):
             raise ProtocolError("bad_request", f"field 'cmd' must be a string, got {type(cmd).__name__}")
         if cmd not in REQUESTS:

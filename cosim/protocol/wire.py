@@ -209,9 +209,8 @@ def check_fields(obj: Any, fields: Fields, path: str, strict: bool = True) -> di
     if strict and not obj.keys() <= fields.keys():  # a set comparison in C; the list only for the message
         unknown = [k for k in obj if k not in fields]
         if unknown:
-            raise ProtocolError(
-                "bad_request", f"{path}: unknown field(s) {', '.join(map(repr, unknown))}; known: {', '.join(fields)}"
-            )
+            known = f"known: {', '.join(fields)}" if fields else "it takes none"
+            raise ProtocolError("bad_request", f"{path}: unknown field(s) {', '.join(map(repr, unknown))}; {known}")
     out = {}
     for name, (check, required) in fields.items():
         if name in obj:
