@@ -21,15 +21,16 @@ def _clock(seconds: float) -> str:
 
 
 class Progress:
-    """On a terminal, one line redrawn at most twice a second and once more at the end (100 % when
-    the run finished). When the stream is not a terminal (a log file, a pipe), nothing: no redraws
-    pile up in logs, and the run's summary line says how it went."""
+    """On a terminal or in a Jupyter notebook, one line redrawn at most twice a second and once more at the end
+    (100 % when the run finished). When the stream is neither (a log file, a pipe), nothing: no redraws pile up
+    in logs, and the run's summary line says how it went."""
 
     def __init__(self, t_start: float, t_stop: float, stream: TextIO = sys.stderr, enabled: bool = True,
                  clock: Callable[[], float] = time.monotonic) -> None:
         self.t_start, self.t_stop, self.stream, self.clock = t_start, t_stop, stream, clock
         self.tty = hasattr(stream, "isatty") and stream.isatty()
-        self.enabled = enabled and self.tty
+        self.notebook = type(stream).__module__.startswith("ipykernel")  # it redraws on "\r", says no tty
+        self.enabled = enabled and (self.tty or self.notebook)
         self.started = clock()
         self._shown = float("-inf")
         self.intervals = self.stages = 0
@@ -63,7 +64,8 @@ class Progress:
                 f"{self.stages / max(self.intervals, 1):.2f} stages/interval  {left}")
 
     def _draw(self, now: float) -> None:
-        self.stream.write("\r" + self.line(now) + "\x1b[K")
+        line = self.line(now)  # a terminal clears the rest of the line; a notebook gets spaces over it
+        self.stream.write("\r" + (line + "\x1b[K" if self.tty else line.ljust(100)))
         self.stream.flush()
 
     def done(self) -> None:

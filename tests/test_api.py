@@ -164,3 +164,24 @@ def test_a_run_without_output_writes_nothing_and_an_interval_callback_sees_each_
     assert seen == list(r.diagnostics["t1"]) and len(seen) == 6
     with pytest.raises(KeyError, match=r"name one as 'subsim.port\[i\]'"):
         r.column("mass1.u")
+
+
+def test_progress_is_drawn_in_a_notebook_and_not_in_a_log_file() -> None:
+    """A Jupyter kernel's stderr says it is no terminal but shows "\\r" redraws: cosim.run(progress=True) drew
+    nothing there. A plain file still gets nothing (logs stay clean)."""
+    import io
+
+    from cosim.progress import Progress
+
+    class OutStream(io.StringIO):  # stands for ipykernel.iostream.OutStream
+        pass
+
+    OutStream.__module__ = "ipykernel.iostream"
+    notebook, log = OutStream(), io.StringIO()
+    for stream in (notebook, log):
+        bar = Progress(0.0, 1.0, stream=stream, clock=lambda: 0.0)
+        interval = type("I", (), {"t": np.array([0.0, 0.5]), "stages": 3})()
+        bar.update(interval)
+        bar.done()
+    assert notebook.getvalue().startswith("\r 50.0%  t = 0.5 / 1 s") and "\x1b" not in notebook.getvalue()
+    assert log.getvalue() == ""
