@@ -16,6 +16,7 @@ import argparse
 import os
 import signal
 import socket
+import sys
 import threading
 import time
 from collections.abc import Sequence
@@ -41,6 +42,9 @@ _why_stopping: list[str] = []  # why this process sent itself SIGTERM, when it d
 
 def _raise_stop(signum: int, frame: object) -> None:
     raise _Stop(_why_stopping[0] if _why_stopping else f"on {signal.Signals(signum).name}")
+
+
+_router_lost = threading.Event()  # nothing to close politely: Zenoh's close would wait for it about 8 s
 
 
 def _stop_self(why: str) -> None:
@@ -157,6 +161,7 @@ def _watch_router(session: zenoh.Session, grace: float = 2.0) -> None:
         now = time.monotonic()
         lost_since = None if connected else (lost_since or now)
         if lost_since is not None and now - lost_since >= grace:
+            _router_lost.set()
             _stop_self(f"as the coordinator's router has been unreachable for {grace:g} s")
             return
 
@@ -211,8 +216,12 @@ def main(model_cls: type[Subsim] | Subsim, argv: Sequence[str] | None = None, pr
             # reply) must not interrupt the clean-up and turn exit code 0 into a traceback
             signal.signal(signal.SIGTERM, signal.SIG_IGN)
             signal.signal(signal.SIGINT, signal.SIG_IGN)
-            if server is not None:
+            if server is not None and not _router_lost.is_set():
                 server.close()
     finally:
+        if _router_lost.is_set():  # the router is gone: leave now (the system closes our sockets)
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os._exit(0)
         session.close()
     return 0
