@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import shlex
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -144,7 +145,10 @@ def _describe(args: argparse.Namespace) -> int:
         print("subsims:")
         for name, d in session.descriptions.items():
             ins, outs = _ports(d.inputs), _ports(d.outputs)
-            kind = "external" if scenario.subsims[name].external else scenario.subsims[name].model
+            spec = scenario.subsims[name]
+            kind = "external" if spec.external else spec.model
+            if spec.launcher:
+                kind += f", started with {shlex.join(spec.launcher)}"
             print(f"  {name} [{kind}]{' algebraic' if d.algebraic else ''}\n    in:  {ins or '-'}\n    out: {outs}")
             given = scenario.subsims[name].params
             for k, p in d.params.items():  # the model's declared parameters: the value used, unit, meaning
