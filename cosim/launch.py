@@ -188,6 +188,7 @@ class Bus:
     search_path: tuple[str, ...] | None = None  # its scenario's module directories (None: every one loaded so far)
     _spawned_as: dict[str, tuple[str, str | None, float | None, Elsewhere | None]] = field(default_factory=dict,
                                                                                          repr=False)
+    _generation: dict[str, int] = field(default_factory=dict, repr=False)  # replacements respawn started, by name
 
     @classmethod
     def open(cls, listen: str = "tcp/127.0.0.1:0", run: str | None = None, security: Security | None = None,
@@ -227,8 +228,9 @@ class Bus:
         return bus
 
     def key(self, name: str) -> bytes:
-        """The key subsim ``name`` signs with (only that subsim gets it)."""
-        return subsim_key(self.secret, self.run, name)
+        """The key subsim ``name`` signs with (only that subsim gets it); each replacement :meth:`respawn` starts
+        gets a key of its own."""
+        return subsim_key(self.secret, self.run, name, self._generation.get(name, 0))
 
     def subsim_env(self, name: str) -> dict[str, str]:
         """What a subsim process of this run needs in its environment: its key and its login to the router."""
@@ -334,6 +336,8 @@ class Bus:
             old.handle.close()
             self.processes.remove(old)
         module, model, lease, elsewhere = self._spawned_as[name]
+        # a new key: the old process, if it was only stopped (a launcher cannot kill it over there), stays deaf
+        self._generation[name] = self._generation.get(name, 0) + 1
         return self.spawn(module, name, model=model, lease=lease, elsewhere=elsewhere,
                           **spawn_args)  # type: ignore[arg-type]
 

@@ -232,3 +232,29 @@ def test_a_second_copy_started_by_hand_is_named_not_taken_for_the_first(cosim_bu
         assert err.value.code == "duplicate" and "a second process answers as 'twin'" in str(err.value)
     finally:
         terminate(copy)
+
+
+def test_a_replaced_process_that_comes_back_stays_deaf(cosim_bus: Bus) -> None:
+    """A subsim started through a launcher that cannot kill it (ssh: killing ssh leaves the remote process) hangs,
+    is replaced, then runs again. Each replacement gets a key of its own, so the old process can neither read the
+    new one's requests nor answer them: the run goes on with the replacement (the old one answering with its key
+    would have been a second server: 'duplicate', or worse, its stale state believed)."""
+    from cosim.launch import Elsewhere
+
+    forking = Elsewhere(("sh", "-c", 'sh -c "$1"; :', "launcher"), python=sys.executable)  # the subsim in a child
+    proc = cosim_bus.spawn("subsims.integrator", "phoenix", elsewhere=Elsewhere(
+        forking.launcher, python=sys.executable, connect=cosim_bus.endpoint))
+    old = proc.handle.status()["pid"]
+    assert old != proc.popen.pid  # not the launcher's own process: killing that leaves it
+    try:
+        os.kill(old, signal.SIGSTOP)
+        new = cosim_bus.respawn("phoenix")
+        assert os.path.exists(f"/proc/{old}")  # the launcher was killed, the old subsim was not
+        os.kill(old, signal.SIGCONT)
+        new.handle.configure({})
+        t = np.array([0.0, 0.5])
+        for _ in range(200):  # the old process is connected again and sees every query on the key
+            assert new.handle.run_interval(t, {"u": np.ones((2, 1))}).end_time == 0.5
+        assert new.handle.status()["pid"] not in (old, new.popen.pid)
+    finally:
+        os.kill(old, signal.SIGKILL)

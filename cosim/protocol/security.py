@@ -29,9 +29,14 @@ def new_master_secret() -> bytes:
     return secrets.token_bytes(KEY_BYTES)
 
 
-def subsim_key(master: bytes, run: str, name: str) -> bytes:
-    """The key subsim ``name`` of run ``run`` signs with: HMAC-SHA256(master, "cosim-subsim-key" 0 run 0 name)."""
-    return hmac.new(master, b"cosim-subsim-key\0" + run.encode() + b"\0" + name.encode(), hashlib.sha256).digest()
+def subsim_key(master: bytes, run: str, name: str, generation: int = 0) -> bytes:
+    """The key subsim ``name`` of run ``run`` signs with: HMAC-SHA256(master, "cosim-subsim-key" 0 run 0 name), and
+    for the ``generation``-th replacement the coordinator started, ... 0 name 0 generation: a replaced process
+    that comes back to life can neither read its successor's requests nor answer them."""
+    label = b"cosim-subsim-key\0" + run.encode() + b"\0" + name.encode()
+    if generation:
+        label += b"\0" + str(generation).encode()
+    return hmac.new(master, label, hashlib.sha256).digest()
 
 
 def zenoh_login(master: bytes, run: str, name: str | None = None) -> tuple[str, str]:

@@ -280,8 +280,8 @@ class RemoteHandle(SubsimHandle):
                     self._server = server
                 elif server != self._server:  # sealed with its key: a second copy of this subsim, started by hand
                     raise SubsimError("duplicate", f"a second process answers as {self.name!r} (Zenoh id {server}, "
-                                      f"besides {self._server}): it was started twice; stop the copy that was "
-                                      "started last and run again (or --resume)", self.name, cmd)
+                                      f"besides {self._server}): it was started twice; stop one of them and run "
+                                      "again (or --resume)", self.name, cmd)
                 try:
                     result = decode_reply(cmd, body)
                 except ProtocolError as exc:
