@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -171,6 +172,9 @@ def test_the_seal_checks_fail_a_subsim_that_answers_every_frame(cosim_bus) -> No
         key, zenoh_login(cosim_bus.secret, cosim_bus.run))))
     try:
         queryable = lax.declare_queryable(rpc_key(cosim_bus.run, "lax"), respond)
+        deadline = time.monotonic() + 30  # until the router knows the queryable (declarations propagate late)
+        while not cosim_bus.query(rpc_key(cosim_bus.run, "lax"), b"ping", 1.0) and time.monotonic() < deadline:
+            time.sleep(0.05)
         c = Checker(lambda payload: None, "lax")
         c.description = runtime.describe()
         _check_seals(c, cosim_bus, "lax", wait=3.0)  # each of them is answered, however loaded the machine

@@ -421,7 +421,7 @@ def test_a_subsim_whose_replies_carry_no_valid_tag_is_named_unauthenticated(cosi
         token = impostor.liveliness().declare_token(alive_key(cosim_bus.run, "mis"))
         with pytest.raises(SubsimError, match=r"mis.connect: \[unauthenticated\] it answers, but none of its \d+ "
                                               r"replies in \d+ s carried a valid tag"):
-            cosim_bus.attach("mis", wait=1.5)
+            cosim_bus.attach("mis", wait=5.0)
         token.undeclare()
         queryable.undeclare()
     finally:
