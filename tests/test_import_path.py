@@ -77,22 +77,8 @@ def test_modules_beside_the_scenario_and_in_the_working_directory(tmp_path: Path
     assert abs(data[-1, 2] - 0.25) < 1e-14  # the integral of 2 t from 0 to 0.5
 
 
-VARIANT = '''
-import numpy as np
-from cosim import Port, Subsim
-
-
-class Ramp(Subsim):
-    """y' = RATE."""
-    outputs = {"y": Port(1)}
-
-    def initial_state(self, params):
-        return np.zeros(1)
-
-    def advance(self, state, times, u):
-        y = state[0] + RATE * (times - times[0])
-        return {"y": y[:, None]}, y[-1:]
-'''
+VARIANT = MODEL.replace('"""y\' = 1."""', '"""y\' = RATE."""').replace("state[0] + (times", "state[0] + RATE * (times")
+assert VARIANT.count("RATE") == 2
 
 
 @pytest.mark.parametrize("inprocess", [True, False], ids=["inprocess", "launched"])
