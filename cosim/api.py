@@ -13,6 +13,7 @@ command line: the result file is written only when ``output`` is given. See docs
 from __future__ import annotations
 
 import math
+import numbers
 import signal
 import tempfile
 from collections.abc import Callable, Mapping
@@ -160,15 +161,16 @@ def run(
 
 def _check_arguments(sc: Scenario, stop: Any, restarts: Any, timeout: Any, attach_wait: Any) -> None:
     """The numbers ``cosim run`` checks on its command line, checked here too: one line each."""
-    def number(value: Any) -> bool:
-        return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+    def number(value: Any) -> bool:  # numpy's scalars too (a stop from np.arange)
+        return isinstance(value, numbers.Real) and not isinstance(value, bool) and math.isfinite(value)
 
     if stop is not None and not (number(stop) and stop > sc.start):
         raise ScenarioError(f"stop must be a finite time after the scenario's start ({sc.start:g} s), got {stop!r}")
     for name, value in (("timeout", timeout), ("attach_wait", attach_wait)):
         if value is not None and not (number(value) and value > 0):
             raise ScenarioError(f"{name} must be a finite number of seconds > 0, got {value!r}")
-    if restarts is not None and (isinstance(restarts, bool) or not isinstance(restarts, int) or restarts < 0):
+    if restarts is not None and (isinstance(restarts, bool) or not isinstance(restarts, numbers.Integral)
+                                 or restarts < 0):
         raise ScenarioError(f"restarts must be a whole number >= 0, got {restarts!r}")
 
 

@@ -162,6 +162,7 @@ def test_a_run_without_output_writes_nothing_and_an_interval_callback_sees_each_
                   log=lambda line: None)
     assert list(tmp_path.iterdir()) == []  # no scratch directory, no results/ directory
     assert seen == list(r.diagnostics["t1"]) and len(seen) == 6
+    assert cosim.run(OSCILLATOR, stop=np.float64(0.3), restarts=np.int64(1), inprocess=True).t.size == r.t.size
     with pytest.raises(KeyError, match=r"name one as 'subsim.port\[i\]'"):
         r.column("mass1.u")
 
