@@ -9,6 +9,7 @@ from __future__ import annotations
 import copy
 import math
 import os
+import sysconfig
 import traceback
 from collections import deque
 from collections.abc import Callable, Mapping
@@ -36,8 +37,20 @@ def _model_frames(exc: BaseException) -> str:
 
 
 def _model_exception(where: str, exc: BaseException) -> CosimError:
-    """A model's unexpected exception as an error that names it in one line and carries the model's own frames."""
-    return CosimError("model_exception", f"{where}() raised {type(exc).__name__}: {exc}", _model_frames(exc))
+    """A model's unexpected exception as an error that names it in one line, with the line of the model's own
+    code it came from (a test's failure shows where), and carries the model's own frames."""
+    line = _model_line(exc)
+    return CosimError("model_exception", f"{where}() raised {type(exc).__name__}: {exc}{line}", _model_frames(exc))
+
+
+def _model_line(exc: BaseException) -> str:
+    """`` (file.py:12 in helper)``: the innermost frame outside installed packages and the standard library."""
+    libraries = tuple(p for p in {sysconfig.get_paths()[k] for k in ("stdlib", "purelib", "platlib")} if p)
+    own = exc.__traceback__.tb_next if exc.__traceback__ is not None else None  # the runtime's frame left out
+    for frame in reversed(traceback.extract_tb(own)):
+        if frame.filename and not frame.filename.startswith(libraries) and not frame.filename.startswith("<"):
+            return f" ({os.path.basename(frame.filename)}:{frame.lineno} in {frame.name})"
+    return ""
 
 
 def _readonly(a: np.ndarray) -> np.ndarray:

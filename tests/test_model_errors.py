@@ -82,7 +82,7 @@ def test_a_model_exception_shows_its_own_traceback_under_one_line(project: Path,
     at = next(i for i, line in enumerate(lines) if line.startswith("cosim: run stopped"))
     first, rest = lines[at], lines[at + 1:]
     assert first.startswith("cosim: run stopped: a.run_interval: [model_exception] advance() raised ZeroDivisionError")
-    assert "the model divided by zero" in first
+    assert "the model divided by zero (buggy.py:" in first and " in helper)" in first  # where, in the one line
     text = "\n".join(rest)
     assert "Traceback" not in first and "the model's traceback (in subsim 'a')" in text
     assert f'File "{project / "buggy.py"}", line' in text and "in helper" in text and "in advance" in text
