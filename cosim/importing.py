@@ -22,6 +22,7 @@ from typing import Any
 from cosim.subsim import Subsim
 
 SEARCH_PATH: list[str] = []  # directories add_search_path put on sys.path, in order
+MODULE_PATH_ENV = "COSIM_MODULE_PATH"  # a launched subsim's scenario directories (os.pathsep-separated)
 
 
 def add_search_path(*directories: str | Path) -> None:
@@ -66,16 +67,17 @@ def _home(spec: importlib.machinery.ModuleSpec | None) -> str | None:
 
 
 def _take_own(top: str, search_path: Sequence[str]) -> None:
-    """Import ``top`` from ``search_path`` if what Python would use instead comes from another scenario's directory
-    (one in :data:`SEARCH_PATH`, not in ``search_path``). Installed modules are never touched."""
+    """Import ``top`` as ``search_path``, in its order, finds it, if what Python would use instead is another
+    scenario-directory module of that name (from a directory in :data:`SEARCH_PATH`: another scenario's, or this
+    one's working directory where its own directory has one). Installed modules are never touched."""
     if not search_path:
         return
     loaded = sys.modules.get(top)
-    home = _home(getattr(loaded, "__spec__", None) if loaded is not None else importlib.util.find_spec(top))
-    if home is None or home not in SEARCH_PATH or home in search_path:
+    current = getattr(loaded, "__spec__", None) if loaded is not None else importlib.util.find_spec(top)
+    if _home(current) not in SEARCH_PATH:  # installed, built in, or nowhere
         return
     spec = importlib.machinery.PathFinder.find_spec(top, list(search_path))
-    if spec is None or spec.loader is None:  # this scenario's directories have none: Python's choice stands
+    if spec is None or spec.loader is None or spec.origin == current.origin:  # none here, or the same file
         return
     for name in [k for k in sys.modules if k == top or k.startswith(top + ".")]:
         del sys.modules[name]
@@ -86,6 +88,16 @@ def _take_own(top: str, search_path: Sequence[str]) -> None:
     except BaseException:
         del sys.modules[top]
         raise
+
+
+def use_search_path(directories: Sequence[str]) -> None:
+    """In a subsim process ``cosim run`` started: import from its scenario's ``directories`` as the coordinator
+    does, after the installed packages and in their order (``python -m`` put the working directory first, where
+    a module of the working directory would shadow one beside the scenario)."""
+    gone = {os.path.abspath(d) for d in directories} | {os.getcwd()}
+    sys.path[:] = [p for p in sys.path if os.path.abspath(p or ".") not in gone]
+    add_search_path(*directories)
+    importlib.invalidate_caches()
 
 
 def _where(exc: Exception) -> str:

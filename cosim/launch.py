@@ -20,7 +20,7 @@ from pathlib import Path
 import zenoh
 
 from cosim.contract import SubsimError
-from cosim.importing import SEARCH_PATH
+from cosim.importing import MODULE_PATH_ENV, SEARCH_PATH
 from cosim.protocol.keys import check_name, coordinator_alive_key, new_run_id, rpc_key
 from cosim.protocol.messages import encode_request, next_seq, seal_request
 from cosim.protocol.security import (
@@ -291,8 +291,9 @@ class Bus:
             env = {**os.environ, **secrets}
             env.setdefault("PYTHONUNBUFFERED", "1")
             search = SEARCH_PATH if self.search_path is None else self.search_path
-            if search:  # the scenario's directory and the working directory (cosim.importing)
+            if search:  # the scenario's directory and the working directory (cosim.importing), in that order
                 env["PYTHONPATH"] = os.pathsep.join([*filter(None, [env.get("PYTHONPATH")]), *search])
+                env[MODULE_PATH_ENV] = os.pathsep.join(search)  # cosim.serve puts them after the installed ones
         else:  # the launcher gets neither the secrets (they go on its standard input) nor this machine's paths
             env, argv = dict(os.environ), [*elsewhere.launcher, launcher_line(argv, elsewhere.workdir)]
         try:

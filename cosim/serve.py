@@ -6,9 +6,10 @@ external subsim. (Shipped subsims also have their own ``python -m subsims.<name>
 
 from __future__ import annotations
 
+import os
 import sys
 
-from cosim.importing import load_model
+from cosim.importing import MODULE_PATH_ENV, load_model, use_search_path
 from cosim.process import main as serve_model
 
 
@@ -20,8 +21,11 @@ def main(argv: list[str] | None = None) -> int:
               + ("\n(python -m cosim.serve package.module:Class --help lists every option)" if asked else ""),
               file=sys.stdout if asked else sys.stderr)
         return 0 if asked else 2
+    directories = [d for d in os.environ.pop(MODULE_PATH_ENV, "").split(os.pathsep) if d]
+    if directories:  # launched by cosim run for a scenario: its modules, found as the coordinator finds them
+        use_search_path(directories)
     try:
-        cls = load_model(argv[0])
+        cls = load_model(argv[0], directories)
     except ValueError as exc:
         print(f"cosim.serve: {exc}", file=sys.stderr)
         return 2

@@ -82,20 +82,24 @@ assert VARIANT.count("RATE") == 2
 
 
 @pytest.mark.parametrize("inprocess", [True, False], ids=["inprocess", "launched"])
+@pytest.mark.parametrize("work_in", ["elsewhere", "variant1"])
 def test_two_scenarios_with_a_module_of_the_same_name_each_run_their_own(tmp_path: Path, inprocess: bool,
+                                                                        work_in: str,
                                                                         monkeypatch: pytest.MonkeyPatch) -> None:
     """A study over model variants, each in its own directory under the same module name, in one interpreter: each
-    scenario runs its own module, not the one the first scenario imported (nor the first on sys.path)."""
+    scenario runs its own module, not the one the first scenario imported (nor the first on sys.path), also when
+    the working directory is one of the variants' (its module comes after the scenario's own directory's, as
+    scenarios.md says, in the launched processes too, where `python -m` put the working directory first)."""
     import cosim
 
-    work = tmp_path / "work"
-    work.mkdir()
+    work = tmp_path / ("work" if work_in == "elsewhere" else work_in)
     for rate in (1, 3):
         d = tmp_path / f"variant{rate}"
         d.mkdir()
         (d / "variant_model.py").write_text(f"RATE = {rate}.0\n" + VARIANT)
         (d / "s.toml").write_text(SCENARIO.replace("beside_scenario:Ramp", "variant_model:Ramp")
                                   .replace('transform = "in_cwd:double"\n', ""))
+    work.mkdir(exist_ok=True)
     monkeypatch.chdir(work)
     ends = [float(cosim.run(tmp_path / f"variant{rate}" / "s.toml", inprocess=inprocess)["ramp.y"][-1, 0])
             for rate in (1, 3, 1)]
