@@ -6,6 +6,7 @@ The I/O shell around the coupler: scenario in, processes up, :class:`~cosim.driv
 from __future__ import annotations
 
 import json
+import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -82,10 +83,31 @@ class Session:
                      "attach again (start it with the same command and the same two variables, once the old process "
                      "has exited: two copies answering as one stop the run)")
             handle: SubsimHandle = self.bus.attach(name, timeout=self.timeout, wait=self.external_wait)
+        elif spec.launcher:
+            handle = self._respawn_elsewhere(name)
         else:
             handle = self.bus.respawn(name, timeout=self.timeout).handle
         handle.configure(spec.params, t0=self.scenario.start)
         return handle
+
+    def _respawn_elsewhere(self, name: str) -> SubsimHandle:
+        """A subsim on another machine, started again through its launcher. When it cannot start (the network
+        between the machines is down, as it may well be when the old one was lost), it is tried again every
+        :data:`RETRY_ELSEWHERE` seconds for up to ``external_wait``, as an external subsim is waited for: one
+        replacement, not one restart per try."""
+        assert self.bus is not None
+        give_up, told = time.monotonic() + self.external_wait, False
+        while True:
+            try:
+                return self.bus.respawn(name, timeout=self.timeout).handle
+            except SubsimError as exc:
+                if exc.command not in ("spawn", "connect") or time.monotonic() + RETRY_ELSEWHERE > give_up:
+                    raise
+                if not told:
+                    told = True
+                    self.log(f"cosim: {name} could not be started again over there ({exc.message}); trying again "
+                             f"every {RETRY_ELSEWHERE:g} s for up to {self.external_wait:g} s (--attach-wait)")
+                time.sleep(RETRY_ELSEWHERE)
 
     def close(self) -> None:
         for h in self.handles.values():
@@ -176,6 +198,7 @@ def open_session(
     return session
 
 
+RETRY_ELSEWHERE = 5.0  # s between tries to start a lost subsim on another machine again
 AWAY_FLOOR = 10.0  # s: the shortest automatic deadline when a subsim is on another machine (a Zenoh lease: a
 # network blip shorter than that is waited out, not taken for a hang that costs a restart)
 
