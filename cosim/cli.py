@@ -118,7 +118,9 @@ def _recover(args: argparse.Namespace) -> int:
 
 def _security(args: argparse.Namespace, default: Security | None) -> Security | None:
     """--tls-*/--auth-file/--mutual-tls replace the scenario's [security] table when any is given."""
-    given = {k: getattr(args, k) for k in ("tls_cert", "tls_key", "tls_ca", "auth_file") if getattr(args, k)}
+    # absolute: subsims started in another directory (a launcher's workdir) are given the same paths
+    given = {k: Path(getattr(args, k)).absolute() for k in ("tls_cert", "tls_key", "tls_ca", "auth_file")
+             if getattr(args, k)}
     if not given and not args.mutual_tls:
         return default
     try:

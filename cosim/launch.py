@@ -87,8 +87,17 @@ def endpoint_for(elsewhere: Elsewhere, listen: str, endpoint: str) -> str:
 
 
 def launcher_line(argv: Sequence[str], workdir: str | None) -> str:
-    """The shell line a launcher runs: the two secrets come on standard input, one a line."""
-    cd = f"cd {shlex.quote(workdir)} && " if workdir else ""
+    """The shell line a launcher runs: the two secrets come on standard input, one a line. A ``workdir`` of ``~``
+    or ``~/...`` is the home directory there (the rest quoted: spaces and quotes are the path's own)."""
+    if not workdir:
+        where = None
+    elif workdir == "~":
+        where = "~"
+    elif workdir.startswith("~/"):
+        where = "~/" + shlex.quote(workdir[2:])
+    else:
+        where = shlex.quote(workdir)
+    cd = f"cd -- {where} && " if where else ""
     return (f"{cd}IFS= read -r {SECRET_ENV} && IFS= read -r {ZENOH_AUTH_ENV} && "
             f"export {SECRET_ENV} {ZENOH_AUTH_ENV} PYTHONUNBUFFERED=1 && exec {shlex.join(argv)}")
 
@@ -395,4 +404,6 @@ def _wait_ready_or_exit(handle: RemoteHandle, popen: subprocess.Popen, wait: flo
         if handle.wait_alive(0.05):
             handle.wait_ready(max(deadline - time.monotonic(), 0.1))
             return
-    raise SubsimError("no_responder", f"did not come up within {wait:g} s", handle.name, "spawn")
+    how = "" if elsewhere is None else (f" (its launcher {shlex.join(elsewhere.launcher)!r} still runs: does it "
+                                        "wait for a password or a host key?)")
+    raise SubsimError("no_responder", f"did not come up within {wait:g} s{how}", handle.name, "spawn")

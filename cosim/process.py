@@ -101,6 +101,10 @@ def parse_args(model_cls: type[Subsim] | Subsim, argv: Sequence[str] | None,
     try:
         check_name(args.run, "--run")
         check_name(args.name, "--name")
+        for option, path in (("--tls-ca", args.tls_ca), ("--tls-cert", args.tls_cert), ("--tls-key", args.tls_key),
+                             ("--auth-file", args.auth_file)):
+            if path is not None and not path.is_file():  # Zenoh would say only that it cannot connect
+                raise ValueError(f"{option} {path}: no such file (in {os.getcwd()})")
         args.security = ClientSecurity.from_env(None, args.auth_file, args.tls_ca, args.tls_cert, args.tls_key)
         for name in (SECRET_ENV, ZENOH_AUTH_ENV):  # read once; processes this one starts do not inherit them
             os.environ.pop(name, None)

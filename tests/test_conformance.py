@@ -98,7 +98,10 @@ def check(procs: list, name: str, start_subsim: list[str], *options: str, env: d
     return checker.returncode, out
 
 
-@pytest.mark.parametrize(("package", "params"), [("subsims.oscillator", "{}"), ("subsims.integrator", '{"size": 3}')])
+@pytest.mark.parametrize(("package", "params"), [
+    ("subsims.oscillator", "{}"), ("subsims.integrator", '{"size": 3}'),
+    ("subsims.integrator", '{"size": 100000}'),  # a default request cap of 32 GB: not sent (a MemoryError was)
+])
 def test_a_shipped_subsim_conforms(procs: list, package: str, params: str) -> None:
     code, out = check(procs, "shipped", subsim_command(package, "ENDPOINT", "conf-run", "shipped"), "--params", params)
     assert (code, out) == (0, "")

@@ -105,3 +105,21 @@ def test_a_launcher_runs_the_subsim_in_its_workdir_with_its_secrets_on_standard_
     run_scenario(load(OSCILLATOR), stop=0.5, output=plain, progress=False, log=lambda m: None)
     run_scenario(load(sc), stop=0.5, output=launched, progress=False, log=lambda m: None, listen="tcp/127.0.0.1:0")
     assert launched.read_bytes() == plain.read_bytes()
+
+
+@pytest.mark.parametrize(("workdir", "where"), [
+    ("~", "{home}"), ("~/sat dir", "{home}/sat dir"), ("-dash", "{cwd}/-dash"), ("it's $HOME", "{cwd}/it's $HOME"),
+])
+def test_a_launchers_line_goes_to_its_workdir_as_written(tmp_path: Path, workdir: str, where: str) -> None:
+    """``~`` is the home directory over there (it was quoted: 'cd: can't cd to ~'), a name starting with '-' is a
+    directory, not an option of cd, and quotes and $ are the path's own."""
+    from cosim.launch import launcher_line
+
+    home, cwd = tmp_path / "home", tmp_path / "cwd"
+    for d in (home / "sat dir", cwd / "-dash", cwd / "it's $HOME"):
+        d.mkdir(parents=True)
+    done = subprocess.run(["sh", "-c", launcher_line(["sh", "-c", 'pwd; echo "$COSIM_SECRET"'], workdir)],
+                          input="key\nlogin\n", capture_output=True, text=True, cwd=cwd, timeout=30,
+                          env={**os.environ, "HOME": str(home)})
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.splitlines() == [where.format(home=home, cwd=cwd), "key"]

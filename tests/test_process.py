@@ -8,6 +8,7 @@ import socket
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -258,3 +259,13 @@ def test_a_replaced_process_that_comes_back_stays_deaf(cosim_bus: Bus) -> None:
         assert new.handle.status()["pid"] not in (old, new.popen.pid)
     finally:
         os.kill(old, signal.SIGKILL)
+
+
+def test_a_tls_file_that_is_not_there_is_named_at_start(tmp_path: Path) -> None:
+    """--tls-ca pointing at nothing (a relative path from another directory): Zenoh only said after 10 s that it
+    could not connect, 'or its login/TLS refused ours'."""
+    cmd = subsim_command("subsims.integrator", "tls/127.0.0.1:7447", "run-x", "lonely",
+                         tls_ca=Path("certs/ca.pem"))
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=30, cwd=tmp_path,
+                          env={**os.environ, "COSIM_SECRET": "00" * 32})
+    assert done.returncode == 2 and f"--tls-ca certs/ca.pem: no such file (in {tmp_path})" in done.stderr
