@@ -26,6 +26,7 @@ import numpy as np
 from cosim import interrupt
 from cosim.console import say
 from cosim.coupler.relaxation import Interval, RunSummary
+from cosim.protocol.keys import check_name
 from cosim.results import DIAG_COLUMNS, read_results
 from cosim.runner import run_scenario
 from cosim.scenario import Scenario, ScenarioError, load, parse
@@ -132,6 +133,13 @@ def run(
         sc = _with_params(sc, params)
     method = method or sc.default_method
     _check_arguments(sc, stop, restarts, timeout, attach_wait)
+    if output is not None and Path(output).suffix not in (".csv", ".npz"):
+        raise ScenarioError(f"output {str(output)!r}: a result file ends in .csv or .npz (lower case)")
+    if run_id is not None:
+        try:
+            check_name(run_id, "run id")
+        except ValueError as exc:  # refused over the bus anyway; in-process too, as the command refuses it
+            raise ScenarioError(str(exc)) from None
     if resume and output is None:
         raise ScenarioError("resume=True goes on with the results of an interrupted run: give its output= file")
     if resume and method == "unified":

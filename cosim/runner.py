@@ -230,10 +230,10 @@ def _resume_point(scenario: Scenario, method: str, key: str, output: Path, stop:
     saved = load_resume(resume_path(output))
     if saved.fingerprint != key or saved.t_start != scenario.start:
         raise OutputError(f"{resume_path(output)} is a resume point of another scenario or method than "
-                          f"{scenario.path} --method {method} (they must be the same but for stop): run it from the "
-                          "start with --overwrite")
+                          f"{scenario.path} with method {method} (they must be the same but for stop): run it from "
+                          "the start (--overwrite; cosim.run without resume)")
     if saved.point.t >= stop:
-        raise OutputError(f"{output}: the run it continues got to t = {saved.point.t:g}, at or past --stop {stop:g}: "
+        raise OutputError(f"{output}: the run it continues got to t = {saved.point.t:g}, at or past stop = {stop:g}: "
                           "nothing to resume")
     return saved
 

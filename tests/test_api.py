@@ -148,7 +148,9 @@ def test_arguments_the_command_would_refuse_are_refused_in_one_line(tmp_path: Pa
                           ({"restarts": -1}, "restarts must be a whole number >= 0"),
                           ({"timeout": 0}, "timeout must be a finite number of seconds > 0"),
                           ({"params": {"mass1": 3}}, "params['mass1'] must be {parameter: value}, got int"),
-                          ({"run_id": "pa/bad"}, "run id 'pa/bad' must be 1-64 characters")):
+                          ({"run_id": "pa/bad"}, "run id 'pa/bad' must be 1-64 characters"),
+                          ({"run_id": "a/b*", "inprocess": True}, "run id 'a/b*' must be 1-64 characters"),
+                          ({"output": "x.txt"}, "output 'x.txt': a result file ends in .csv or .npz")):
         with pytest.raises(ScenarioError, match=re.escape(words)):
             cosim.run(OSCILLATOR, **kwargs)
 
