@@ -387,6 +387,10 @@ class _Parser:
                 value = spec[name]
                 if not isinstance(value, str) or not value:
                     raise self.fail(f"{key}.{name}", f"must be a non-empty string, got {value!r}")
+                proto, slash, address = value.partition("/")
+                if name == "connect" and not (slash and proto.isalnum() and address.rpartition(":")[2].isdigit()):
+                    raise self.fail(f"{key}.connect", f"must be an endpoint such as 'tcp/192.168.1.10:7447', got "
+                                    f"{value!r}")
                 fields[name] = value
         return fields
 

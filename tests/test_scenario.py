@@ -78,6 +78,8 @@ def test_good_scenario_loads_with_per_method_settings(tmp_path: Path) -> None:
          "launcher (cosim starts it elsewhere) or external = true (you start it), not both"),
         ("[subsims.b]", "[subsims.b]\nlauncher = ['ssh', 'h']\npython = 3", "subsims.b.python",
          "must be a non-empty string"),
+        ("[subsims.b]", "[subsims.b]\nlauncher = ['ssh', 'h']\nconnect = 'garbage'", "subsims.b.connect",
+         "must be an endpoint such as 'tcp/192.168.1.10:7447', got 'garbage'"),
         # values of the wrong type: refused by key, never a bare TypeError or AttributeError
         ('to = "b.u"', "to = 3", "couplings[1].to", "must be a string, got 3"),
         ('from = ["a.y"]', 'from = ["a.y", 4]', "couplings[1].from", "must be a 'subsim.port' string or a list"),
