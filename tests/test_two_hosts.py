@@ -241,13 +241,10 @@ def _launched_mass2(coordinator: int, hosts: Hosts) -> int:
     return away[0]
 
 
-def test_a_subsim_started_on_another_host_by_its_launcher_gives_the_local_results_and_is_replaced(
-        hosts: Hosts, tmp_path: Path) -> None:
-    """``launcher`` starts mass2 in the other namespace (as ``ssh host`` would on another machine), its secrets on
-    its standard input: the results equal the one-machine run's, byte for byte; killed there mid-run it is started
-    again through its launcher and the results are still the same; the launcher never sees the secrets as
-    arguments."""
-    stop = 30.0
+def _launched_run(hosts: Hosts, tmp_path: Path, stop: float = 30.0) -> tuple[Path, Path, subprocess.Popen]:
+    """The oscillator run here to ``stop`` (the reference), and ``cosim run`` of it in namespace a with mass2 started
+    in namespace b by its launcher, once it is well into the run: (local results, remote results, the coordinator,
+    which the caller stops)."""
     scenario = tmp_path / "oscillator-launched.toml"
     launcher = json.dumps(["ip", "netns", "exec", hosts.b, "sh", "-c"])
     scenario.write_text(OSCILLATOR.read_text().replace(
@@ -266,8 +263,23 @@ def test_a_subsim_started_on_another_host_by_its_launcher_gives_the_local_result
         while time.monotonic() < deadline and (not remote.exists() or len(remote.read_text().splitlines()) < 100):
             assert coordinator.poll() is None, coordinator.communicate()[1][-2000:]
             time.sleep(0.02)
+    except BaseException:
+        _stop(coordinator)
+        raise
+    return local, remote, coordinator
+
+
+def test_a_subsim_started_on_another_host_by_its_launcher_gives_the_local_results_and_is_replaced(
+        hosts: Hosts, tmp_path: Path) -> None:
+    """``launcher`` starts mass2 in the other namespace (as ``ssh host`` would on another machine), its secrets on
+    its standard input: the results equal the one-machine run's, byte for byte; killed there mid-run it is started
+    again through its launcher and the results are still the same; the launcher never sees the secrets as
+    arguments."""
+    local, remote, coordinator = _launched_run(hosts, tmp_path)
+    try:
         first = _launched_mass2(coordinator.pid, hosts)
         os.kill(first, signal.SIGKILL)
+        deadline = time.monotonic() + 120
         while time.monotonic() < deadline and coordinator.poll() is None:  # its replacement: over there too
             try:
                 if _launched_mass2(coordinator.pid, hosts) != first:
@@ -290,25 +302,8 @@ def test_a_launched_subsim_lost_in_an_outage_is_started_again_once_the_link_is_b
     fails at once while the network is down. Every try used up a restart (five in under a second); now it is tried
     again every 5 s, as an external subsim is waited for, and the run goes on once the link is back, with the
     one-machine results byte for byte."""
-    stop = 30.0
-    scenario = tmp_path / "oscillator-launched.toml"
-    launcher = json.dumps(["ip", "netns", "exec", hosts.b, "sh", "-c"])
-    scenario.write_text(OSCILLATOR.read_text().replace(
-        "[subsims.mass2]\n", f"[subsims.mass2]\nlauncher = {launcher}\nworkdir = {json.dumps(str(ROOT))}\n"
-                             f"python = {json.dumps(sys.executable)}\n"))
-    local = tmp_path / "local.csv"
-    run_scenario(load(OSCILLATOR), method="distributed", stop=stop, output=local, progress=False, log=lambda m: None)
-    remote = tmp_path / "remote.csv"
-    coordinator = subprocess.Popen(
-        [*hosts.exec(hosts.a), sys.executable, "-m", "cosim.cli", "run", str(scenario), "--method", "distributed",
-         "--stop", str(stop), "--output", str(remote), "--quiet", "--listen", f"tcp/{hosts.addr_a}:7447"],
-        env={**os.environ, "PYTHONPATH": str(ROOT)}, stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
-        cwd=tmp_path)
+    local, remote, coordinator = _launched_run(hosts, tmp_path)
     try:
-        deadline = time.monotonic() + 120
-        while time.monotonic() < deadline and (not remote.exists() or len(remote.read_text().splitlines()) < 100):
-            assert coordinator.poll() is None, coordinator.communicate()[1][-2000:]
-            time.sleep(0.02)
         # down on the far side: there the route goes too, and a new subsim fails at once (network unreachable)
         assert _ip("-n", hosts.b, "link", "set", hosts.link_b, "down").returncode == 0
         time.sleep(14.0)
