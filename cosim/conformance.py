@@ -25,9 +25,9 @@ import json
 import math
 import secrets
 import sys
-import time
-from collections.abc import Callable, Sequence
-from types import SimpleNamespace
+import threading
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from typing import Any
 
 import msgpack
@@ -47,6 +47,7 @@ from cosim.protocol.messages import (
 )
 from cosim.protocol.service import REPLAY_WINDOW, default_request_cap
 from cosim.protocol.wire import encode_array
+from cosim.subsim import Port
 
 CAP_CHECKED = 64 * 2**20  # bytes: the largest default request cap the checker sends a body over
 Send = Callable[[bytes], "bytes | None"]  # request payload -> reply payload (None: no reply at all)
@@ -403,8 +404,7 @@ def _check_seals(c: Checker, bus: Bus, name: str, wait: float = 1.0) -> None:
     other = f"cosim/{bus.run}/*/rpc"  # (the router's access control keeps `**` queries from subsims anyway)
     if replies(seal_request(key, next_seq(), status), other):
         c.fail("seal", f"a query on {other} was answered; only queries on exactly {rpc} are (section 1)")
-    ports = {p: SimpleNamespace(size=v["size"]) for p, v in (c.description or {}).get("inputs", {}).items()}
-    cap = default_request_cap(ports)  # type: ignore[arg-type]
+    cap = default_request_cap({p: Port(v["size"]) for p, v in (c.description or {}).get("inputs", {}).items()})
     if cap > CAP_CHECKED:  # a body that large would cost the checker (and the machine) gigabytes
         print(f"cosim.conformance: request cap not checked: the default cap for these ports is {cap} bytes (over "
               f"{CAP_CHECKED}); configure it with narrower inputs (--params) to check it", file=sys.stderr)
@@ -424,40 +424,31 @@ def _check_seals(c: Checker, bus: Bus, name: str, wait: float = 1.0) -> None:
 
 def _check_coordinator_left(c: Checker, bus: Bus, name: str) -> None:
     """When the coordinator's liveliness token goes, the subsim stops serving: its own token goes too."""
-    gone = _watch_gone(bus, name)
-    try:
+    with _token_watch(bus, name) as gone:
         bus.withdraw_token()
-        deadline = time.monotonic() + 10.0
-        while not gone[0] and time.monotonic() < deadline:
-            time.sleep(0.05)
-        if not gone[0]:
+        if not gone(10.0):
             c.fail("coordinator left", "the subsim's liveliness token is still there 10 s after the coordinator's "
                    "went; it must stop serving and exit (section 3)")
-    finally:
-        gone[1].undeclare()
-
-
-def _watch_gone(bus: Bus, name: str) -> tuple[list, Any]:
-    gone: list = []
-    sub = bus.session.liveliness().declare_subscriber(
-        alive_key(bus.run, name), lambda s: gone.append(s) if str(s.kind).endswith("DELETE") else None)
-    return gone, sub
 
 
 def _check_shutdown(c: Checker, bus: Bus, name: str) -> None:
     """``shutdown`` replies ``{}`` and the subsim's liveliness token goes away."""
-    gone = []
-    sub = bus.session.liveliness().declare_subscriber(
-        alive_key(bus.run, name), lambda s: gone.append(s) if str(s.kind).endswith("DELETE") else None)
-    try:
+    with _token_watch(bus, name) as gone:
         r = c.ok("shutdown", "shutdown")
         if r is not None and r != {}:
             c.fail("shutdown", f"result {r!r}, expected {{}}")
-        deadline = time.monotonic() + 10.0
-        while not gone and time.monotonic() < deadline:
-            time.sleep(0.05)
-        if not gone:
+        if not gone(10.0):
             c.fail("shutdown", "the subsim's liveliness token is still there 10 s after shutdown")
+
+
+@contextmanager
+def _token_watch(bus: Bus, name: str) -> Iterator[Callable[[float], bool]]:
+    """Watches subsim ``name``'s liveliness token; yields ``gone(seconds)``: whether it went within that long."""
+    went = threading.Event()
+    sub = bus.session.liveliness().declare_subscriber(
+        alive_key(bus.run, name), lambda s: went.set() if str(s.kind).endswith("DELETE") else None)
+    try:
+        yield went.wait
     finally:
         sub.undeclare()
 
