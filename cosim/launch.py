@@ -33,7 +33,7 @@ from cosim.protocol.security import (
     zenoh_login,
 )
 from cosim.protocol.transport.client import EVERY_QUERYABLE, RemoteHandle
-from cosim.protocol.transport.session import open_router
+from cosim.protocol.transport.session import open_router, split_endpoint
 
 
 def subsim_command(
@@ -79,8 +79,11 @@ def endpoint_for(elsewhere: Elsewhere, listen: str, endpoint: str) -> str:
     unspecified host, a Unix socket)."""
     if elsewhere.connect is not None:
         return elsewhere.connect
-    proto, _, address = listen.partition("/")
-    if proto not in ("tcp", "tls", "quic", "udp") or address.rsplit(":", 1)[0] in UNSPECIFIED_HOSTS:
+    try:
+        host = split_endpoint(listen)[0]
+    except ValueError:  # a Unix socket
+        host = ""
+    if listen.partition("/")[0] not in ("tcp", "tls", "quic", "udp") or host in UNSPECIFIED_HOSTS:
         raise ValueError(f"the coordinator listens on {listen}, an address another machine cannot be told: listen "
                          "on an address of this machine it reaches (--listen tcp/<address>:<port>), or set connect")
     return endpoint

@@ -28,7 +28,7 @@ from cosim.console import say
 from cosim.protocol.keys import check_name
 from cosim.protocol.security import SECRET_ENV, ZENOH_AUTH_ENV, ClientSecurity
 from cosim.protocol.transport.server import CommandServer
-from cosim.protocol.transport.session import client_config, error_text
+from cosim.protocol.transport.session import client_config, error_text, split_endpoint
 from cosim.runtime import DEFAULT_HISTORY, Runtime
 from cosim.subsim import Subsim
 
@@ -122,13 +122,15 @@ def unreachable(endpoint: str, timeout: float) -> tuple[str | None, bool]:
     """(why nothing can be reached at a ``tcp/`` or ``tls/`` endpoint, found at once: a name that does not resolve,
     a refused or unroutable connection; whether a TCP connection opened). No reason when a connection opens,
     times out (a slow link: Zenoh goes on trying) or the endpoint is of another kind."""
-    proto, _, address = endpoint.partition("/")
-    host, _, port = address.partition("#")[0].rpartition(":")
+    try:
+        host, port = split_endpoint(endpoint.partition("#")[0])
+    except ValueError:  # Zenoh says what is wrong with it
+        return None, True
     host = host.strip("[]")
-    if proto not in ("tcp", "tls") or not host or not port.isdigit():
+    if endpoint.partition("/")[0] not in ("tcp", "tls"):
         return None, True
     try:
-        with socket.create_connection((host, int(port)), timeout=timeout):
+        with socket.create_connection((host, port), timeout=timeout):
             return None, True
     except socket.gaierror as exc:
         return f"cannot resolve {host!r} ({exc.strerror})", False

@@ -24,6 +24,7 @@ from cosim.launch import PRIVATE, UNSPECIFIED_HOSTS, Bus, Elsewhere, endpoint_fo
 from cosim.outputs import OutputError, reserve_output, resume_path
 from cosim.progress import Progress
 from cosim.protocol.security import Security
+from cosim.protocol.transport.session import split_endpoint
 from cosim.results import ResultWriter, diag_path, output_units
 from cosim.resume import Saved, fingerprint
 from cosim.resume import load as load_resume
@@ -206,9 +207,11 @@ AWAY_FLOOR = 10.0  # s: the shortest automatic deadline when a subsim is on anot
 def attach_endpoint(listen: str | None, endpoint: str) -> tuple[str, str]:
     """The endpoint an external subsim is told, and a hint on reaching it from another machine. A router listening
     on every address (0.0.0.0) is reached at one this machine cannot name for the other: a placeholder then."""
-    proto, _, address = (listen or endpoint).partition("/")
-    host = address.rsplit(":", 1)[0]
-    port = endpoint.rsplit(":", 1)[-1]
+    proto = (listen or endpoint).partition("/")[0]
+    try:
+        host, port = split_endpoint(listen or endpoint)[0], split_endpoint(endpoint)[1]
+    except ValueError:  # a Unix socket
+        return endpoint, "from another machine: the same command, on a machine that reaches this address"
     if host in UNSPECIFIED_HOSTS:
         return (f"{proto}/<this machine's address>:{port}",
                 "replace <this machine's address> by an address of this machine the subsim's machine reaches")

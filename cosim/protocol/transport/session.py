@@ -154,7 +154,7 @@ def open_router(
     free port picked here (the admin space stays closed)."""
     security = security or Security()
     proto = listen.partition("/")[0]
-    host, port = _split_endpoint(listen) if proto in ("tcp", "tls") else ("", -1)  # e.g. unixsock-stream/...
+    host, port = split_endpoint(listen) if proto in ("tcp", "tls") else ("", -1)  # e.g. unixsock-stream/...
     if security.tls and proto != "tls":
         raise ValueError(f"--listen {listen}: with a TLS certificate the endpoint must be tls/<host>:<port>")
     if proto == "tls" and not security.tls:
@@ -201,7 +201,7 @@ def error_text(exc: BaseException) -> str:
     return re.sub(r"\s*at /\S+\.rs:\d+\.?", "", text)
 
 
-def _split_endpoint(endpoint: str) -> tuple[str, int]:
+def split_endpoint(endpoint: str) -> tuple[str, int]:
     host, colon, port = endpoint.partition("/")[2].rpartition(":")
     if not colon or not host or not port.isdigit():
         raise ValueError(f"endpoint {endpoint!r}: expected tcp/<host>:<port> or tls/<host>:<port>")
