@@ -69,6 +69,11 @@ class Elsewhere:
     python: str = "python3"
     connect: str | None = None
 
+    @property
+    def shown(self) -> str:
+        """The launcher as a user would type it."""
+        return shlex.join(self.launcher)
+
 
 UNSPECIFIED_HOSTS = ("0.0.0.0", "[::]", "::")
 
@@ -256,16 +261,14 @@ class Bus:
                              "gives logins only to the names it opened with")
 
     def command(self, module: str, name: str, model: str | None = None, lease: float | None = None,
-                elsewhere: Elsewhere | None = None) -> list[str]:
-        """The command line of a subsim of this run (under mutual TLS, local ones show the router's certificate;
-        one started ``elsewhere`` is given the same TLS file paths, which must hold the same files there)."""
+                endpoint: str | None = None, python: str = sys.executable) -> list[str]:
+        """The command line of a subsim of this run, connecting to ``endpoint`` (default: the router's) with
+        ``python`` (under mutual TLS, it shows the router's certificate; a subsim started elsewhere is given the
+        same TLS file paths, which must hold the same files there)."""
         sec = self.security
         client = (sec.tls_cert, sec.tls_key) if sec.mutual and sec.tls_cert and sec.tls_key else None
-        if elsewhere is None:
-            return subsim_command(module, self.endpoint, self.run, name, model, tls_ca=sec.tls_ca, tls_client=client,
-                                  lease=lease)
-        return subsim_command(module, elsewhere.connect or self.endpoint, self.run, name, model,
-                              python=elsewhere.python, tls_ca=sec.tls_ca, tls_client=client, lease=lease)
+        return subsim_command(module, endpoint or self.endpoint, self.run, name, model, python=python,
+                              tls_ca=sec.tls_ca, tls_client=client, lease=lease)
 
     def attach(self, name: str, timeout: float = 60.0, wait: float = 10.0) -> RemoteHandle:
         """Handle to a subsim that is (or soon will be) serving ``name`` in this run."""
@@ -298,7 +301,8 @@ class Bus:
             raise ValueError(f"subsim {name!r} is served by process {serving[0]} of this bus already: give the "
                              "other one its own name (or respawn it)")
         self._spawned_as[name] = (module, model, lease, elsewhere)  # for respawn, even if this start fails
-        argv = [*self.command(module, name, model, lease=lease, elsewhere=elsewhere), "--quiet-stop"]
+        there = {} if elsewhere is None else {"endpoint": elsewhere.connect, "python": elsewhere.python}
+        argv = [*self.command(module, name, model, lease=lease, **there), "--quiet-stop"]
         if elsewhere is None:
             env = {**os.environ, **secrets}
             env.setdefault("PYTHONUNBUFFERED", "1")
@@ -320,7 +324,7 @@ class Bus:
                 process_group=0,
             )
         except OSError as exc:  # e.g. out of file descriptors or processes, or no such launcher
-            how = "its process" if elsewhere is None else f"its launcher {shlex.join(elsewhere.launcher)!r}"
+            how = "its process" if elsewhere is None else f"its launcher {elsewhere.shown!r}"
             raise SubsimError("no_responder", f"cannot start {how}: {exc}", name, "spawn") from None
         if popen.stdin is not None:
             try:
@@ -402,11 +406,11 @@ def _wait_ready_or_exit(handle: RemoteHandle, popen: subprocess.Popen, wait: flo
     deadline = time.monotonic() + wait
     while time.monotonic() < deadline:
         if popen.poll() is not None:
-            what = "process" if elsewhere is None else f"launcher {shlex.join(elsewhere.launcher)!r}"
+            what = "process" if elsewhere is None else f"launcher {elsewhere.shown!r}"
             raise SubsimError("no_responder", f"{what} exited with code {popen.returncode}", handle.name, "spawn")
         if handle.wait_alive(0.05):
             handle.wait_ready(max(deadline - time.monotonic(), 0.1))
             return
-    how = "" if elsewhere is None else (f" (its launcher {shlex.join(elsewhere.launcher)!r} still runs: does it "
+    how = "" if elsewhere is None else (f" (its launcher {elsewhere.shown!r} still runs: does it "
                                         "wait for a password or a host key?)")
     raise SubsimError("no_responder", f"did not come up within {wait:g} s{how}", handle.name, "spawn")

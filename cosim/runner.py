@@ -167,8 +167,7 @@ def open_session(
             for name, spec in scenario.subsims.items():
                 if spec.external:
                     endpoint, hint = attach_endpoint(listen, bus.endpoint)
-                    cmd = bus.command("<your.subsim.module>", name, spec.model,
-                                      elsewhere=Elsewhere((), python="python", connect=endpoint))
+                    cmd = bus.command("<your.subsim.module>", name, spec.model, endpoint=endpoint, python="python")
                     env = " ".join(f"{k}={v}" for k, v in bus.subsim_env(name).items())
                     log("cosim-attach " + json.dumps({"endpoint": endpoint, "run": bus.run, "name": name,
                                                       "command": cmd, "env": bus.subsim_env(name)}))
