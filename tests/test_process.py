@@ -242,9 +242,9 @@ def test_a_replaced_process_that_comes_back_stays_deaf(cosim_bus: Bus) -> None:
     would have been a second server: 'duplicate', or worse, its stale state believed)."""
     from cosim.launch import Elsewhere
 
-    forking = Elsewhere(("sh", "-c", 'sh -c "$1"; :', "launcher"), python=sys.executable)  # the subsim in a child
-    proc = cosim_bus.spawn("subsims.integrator", "phoenix", elsewhere=Elsewhere(
-        forking.launcher, python=sys.executable, connect=cosim_bus.endpoint))
+    forking = Elsewhere(("sh", "-c", 'sh -c "$1"; :', "launcher"), python=sys.executable,  # the subsim in a child
+                        connect=cosim_bus.endpoint)
+    proc = cosim_bus.spawn("subsims.integrator", "phoenix", elsewhere=forking)
     old = proc.handle.status()["pid"]
     assert old != proc.popen.pid  # not the launcher's own process: killing that leaves it
     try:
