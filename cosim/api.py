@@ -12,8 +12,6 @@ command line: the result file is written only when ``output`` is given. See docs
 
 from __future__ import annotations
 
-import math
-import numbers
 import signal
 import tempfile
 from collections.abc import Callable, Mapping
@@ -26,6 +24,7 @@ import numpy as np
 from cosim import interrupt
 from cosim.console import say
 from cosim.coupler.relaxation import Interval, RunSummary
+from cosim.preflight import UsageError, check_run_arguments
 from cosim.protocol.keys import check_name
 from cosim.results import DIAG_COLUMNS, read_results
 from cosim.runner import run_scenario
@@ -132,9 +131,10 @@ def run(
     if params is not None:
         sc = _with_params(sc, params)
     method = method or sc.default_method
-    _check_arguments(sc, stop, restarts, timeout, attach_wait)
-    if output is not None and Path(output).suffix not in (".csv", ".npz"):
-        raise ScenarioError(f"output {str(output)!r}: a result file ends in .csv or .npz (lower case)")
+    try:  # the command's checks of its options
+        check_run_arguments(sc.start, stop, timeout, attach_wait, restarts, output, options=False)
+    except UsageError as exc:
+        raise ScenarioError(str(exc)) from None
     if run_id is not None:
         try:
             check_name(run_id, "run id")
@@ -165,21 +165,6 @@ def run(
     t, signals, diag = collect.arrays()
     return Result(sc, report.method, t, signals, diag, report.summary, report.order, report.feedback,
                   Path(output) if output is not None else None)
-
-
-def _check_arguments(sc: Scenario, stop: Any, restarts: Any, timeout: Any, attach_wait: Any) -> None:
-    """The numbers ``cosim run`` checks on its command line, checked here too: one line each."""
-    def number(value: Any) -> bool:  # numpy's scalars too (a stop from np.arange)
-        return isinstance(value, numbers.Real) and not isinstance(value, bool) and math.isfinite(value)
-
-    if stop is not None and not (number(stop) and stop > sc.start):
-        raise ScenarioError(f"stop must be a finite time after the scenario's start ({sc.start:g} s), got {stop!r}")
-    for name, value in (("timeout", timeout), ("attach_wait", attach_wait)):
-        if value is not None and not (number(value) and value > 0):
-            raise ScenarioError(f"{name} must be a finite number of seconds > 0, got {value!r}")
-    if restarts is not None and (isinstance(restarts, bool) or not isinstance(restarts, numbers.Integral)
-                                 or restarts < 0):
-        raise ScenarioError(f"restarts must be a whole number >= 0, got {restarts!r}")
 
 
 def _with_params(sc: Scenario, params: Mapping[str, Mapping[str, Any]]) -> Scenario:

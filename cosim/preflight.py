@@ -5,9 +5,11 @@ from __future__ import annotations
 import argparse
 import errno
 import math
+import numbers
 import re
 import socket
 from pathlib import Path
+from typing import Any
 
 from cosim.protocol.transport.session import error_text
 
@@ -18,22 +20,41 @@ class UsageError(ValueError):
 
 def check_stop(stop: float | None, start: float) -> None:
     """``--stop`` must be a finite time after the scenario's start."""
-    if stop is None:
-        return
-    if not math.isfinite(stop) or stop <= start:
-        raise UsageError(f"--stop must be a finite time after the scenario's start ({start:g} s), got {stop:g}")
+    check_run_arguments(start, stop=stop)
 
 
 def check_run_options(args: argparse.Namespace) -> None:
     """``cosim run``'s numbers and output file, as the scenario's ``[run]`` table checks its own: one line each."""
-    for option, value in (("--timeout", args.timeout), ("--attach-wait", args.attach_wait)):
-        if value is not None and not (math.isfinite(value) and value > 0):
-            raise UsageError(f"{option} must be a finite number of seconds > 0, got {value:g}")
-    if args.restarts is not None and args.restarts < 0:
-        raise UsageError(f"--restarts must be a whole number >= 0, got {args.restarts}")
-    output = args.output
+    check_run_arguments(0.0, timeout=args.timeout, attach_wait=args.attach_wait, restarts=args.restarts,
+                        output=args.output)
+
+
+def check_run_arguments(start: float, stop: Any = None, timeout: Any = None, attach_wait: Any = None,
+                        restarts: Any = None, output: Any = None, *, options: bool = True) -> None:
+    """A run's stop time, timeout, attach wait, restarts and output file (None: not given), named as the command's
+    options (``--stop``, values as numbers) or, with ``options=False``, as ``cosim.run``'s arguments (``stop``,
+    values as Python shows them: they may be of any type there). UsageError in one line."""
+    def name(argument: str) -> str:
+        return "--" + argument.replace("_", "-") if options else argument
+
+    def shown(value: Any) -> str:
+        return f"{value:g}" if options else repr(value)
+
+    def number(value: Any) -> bool:  # numpy's scalars too (a stop from np.arange)
+        return isinstance(value, numbers.Real) and not isinstance(value, bool) and math.isfinite(value)
+
+    if stop is not None and not (number(stop) and stop > start):
+        raise UsageError(f"{name('stop')} must be a finite time after the scenario's start ({start:g} s), "
+                         f"got {shown(stop)}")
+    for argument, value in (("timeout", timeout), ("attach_wait", attach_wait)):
+        if value is not None and not (number(value) and value > 0):
+            raise UsageError(f"{name(argument)} must be a finite number of seconds > 0, got {shown(value)}")
+    if restarts is not None and (isinstance(restarts, bool) or not isinstance(restarts, numbers.Integral)
+                                 or restarts < 0):
+        raise UsageError(f"{name('restarts')} must be a whole number >= 0, got {restarts!r}")
     if output is not None and not Path(output).is_dir() and Path(output).suffix not in (".csv", ".npz"):
-        raise UsageError(f"--output {output}: a result file ends in .csv or .npz (lower case)")
+        raise UsageError(f"{name('output')} {output if options else repr(str(output))}: a result file ends in .csv "
+                         "or .npz (lower case)")
 
 
 _TCP = re.compile(r"^(?P<proto>tcp|udp)/(?:\[(?P<v6>[^\]]+)\]|(?P<host>[^:/\[\]]+)):(?P<port>\d+)(?:#.*)?$")
