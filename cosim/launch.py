@@ -9,12 +9,14 @@ import fcntl
 import os
 import shlex
 import shutil
+import signal
 import subprocess
 import sys
 import tempfile
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 
 import zenoh
@@ -110,6 +112,23 @@ def launcher_line(argv: Sequence[str], workdir: str | None) -> str:
             f"export {SECRET_ENV} {ZENOH_AUTH_ENV} PYTHONUNBUFFERED=1 && exec {shlex.join(argv)}")
 
 
+def exit_status(popen: subprocess.Popen, elsewhere: Elsewhere | None = None, wait: float = 0.0) -> str | None:
+    """How a subsim's process ended ("its process was killed by SIGSEGV"), waiting up to ``wait`` seconds for it
+    to be reaped; None while it runs. Started ``elsewhere``, the process here is its launcher."""
+    try:
+        code = popen.wait(wait)
+    except subprocess.TimeoutExpired:
+        return None
+    what = "process" if elsewhere is None else f"launcher {elsewhere.shown!r}"
+    if code >= 0:
+        return f"its {what} exited with code {code}"
+    try:
+        name = signal.Signals(-code).name
+    except ValueError:
+        name = f"signal {-code}"
+    return f"its {what} was killed by {name}"
+
+
 def terminate(popen: subprocess.Popen, grace: float = 3.0) -> int:
     """SIGTERM, then SIGKILL if the process is still there after ``grace`` seconds; always reaps it. Its exit code."""
     if popen.poll() is None:
@@ -154,6 +173,7 @@ class SubsimProcess:
             self.handle.close()
 
 
+DEATH_REAPED = 0.5  # s a dead subsim's process is given to be reaped, so that its error can say how it ended
 PRIVATE = "private"  # Bus.open(PRIVATE): a router only this user's processes on this machine can reach
 PRIVATE_PREFIX = "cosim-bus-"
 
@@ -333,6 +353,7 @@ class Bus:
             except OSError:  # the launcher is gone already: its exit is reported below
                 pass
         handle = RemoteHandle(self.session, self.run, name, timeout=timeout, key=self.key(name))
+        handle.exit_status = partial(exit_status, popen, elsewhere, DEATH_REAPED)
         proc = SubsimProcess(name, popen, handle, module, model, lease, elsewhere)
         self.processes.append(proc)
         try:
@@ -405,9 +426,9 @@ def _wait_ready_or_exit(handle: RemoteHandle, popen: subprocess.Popen, wait: flo
                         elsewhere: Elsewhere | None = None) -> None:
     deadline = time.monotonic() + wait
     while time.monotonic() < deadline:
-        if popen.poll() is not None:
-            what = "process" if elsewhere is None else f"launcher {elsewhere.shown!r}"
-            raise SubsimError("no_responder", f"{what} exited with code {popen.returncode}", handle.name, "spawn")
+        status = exit_status(popen, elsewhere)
+        if status is not None:
+            raise SubsimError("no_responder", status, handle.name, "spawn")
         if handle.wait_alive(0.05):
             handle.wait_ready(max(deadline - time.monotonic(), 0.1))
             return

@@ -33,6 +33,7 @@ def test_kill_9_mid_run_is_reported_within_one_second(cosim_bus: Bus) -> None:
         pending()
     assert time.monotonic() - killed < 1.0
     assert err.value.subsim == "victim" and err.value.command == "run_interval"
+    assert str(err.value).endswith("the process died during the request: its process was killed by SIGKILL"), err.value
     with pytest.raises(SubsimDied):  # later calls fail at once too
         proc.handle.status()
 

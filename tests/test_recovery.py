@@ -245,6 +245,7 @@ def test_with_no_restarts_left_the_failure_stops_the_run() -> None:
         with pytest.raises(SubsimDied) as err:
             ring.run()
         assert ring.coordinator.restarts == [] and "restarts" not in str(err.value)  # none were allowed
+        assert "its process was killed by SIGKILL" in str(err.value)  # how it ended
 
 
 class FailingRevivals(Ring):

@@ -143,6 +143,8 @@ class RemoteHandle(SubsimHandle):
         self.timeout = timeout
         self.deadline: float | None = None
         self.hung = False  # a request missed its deadline: the process is stuck or stopped (its stop need not ask)
+        # how its process ended ("killed by SIGSEGV"), for the error that says it died; set by whoever started it
+        self.exit_status: Callable[[], str | None] | None = None
         self._server: Any = None  # the Zenoh id of the process that answers (its first valid reply's)
         self._in_flight: set[_Pending] = set()
         # A declared querier costs about 35 us less per request than session.get; its timeout is fixed at
@@ -230,7 +232,7 @@ class RemoteHandle(SubsimHandle):
 
     def _begin(self, cmd: str, args: dict[str, Any]) -> Callable[[], dict]:
         if self._died.is_set() and not self._still_served():
-            raise SubsimDied("no_responder", "the subsim process is gone (liveliness lost)", self.name, cmd)
+            raise self._died_error("the subsim process is gone (liveliness lost)", cmd)
         seq, payload = self._seal(encode_request(cmd, args))
         token = zenoh.CancellationToken()
         deadline = self.deadline
@@ -301,7 +303,7 @@ class RemoteHandle(SubsimHandle):
         """What an error reply from zenoh itself (not from the subsim) means."""
         text = reply.err.payload.to_bytes().decode(errors="replace")
         if self._died.is_set():
-            return SubsimDied("no_responder", f"the process died during the request ({text})", self.name, cmd)
+            return self._died_error(f"the process died during the request ({text})", cmd)
         return self._lost_in_pause(cmd, pending) or SubsimError(
             "timeout", f"no reply within {self.timeout:g} s ({text})", self.name, cmd)
 
@@ -330,7 +332,11 @@ class RemoteHandle(SubsimHandle):
             return self._lost_in_pause(cmd, pending) or SubsimError("timeout", f"no reply within {self.timeout:g} s",
                                                                     self.name, cmd)
         reason = "the process died during the request" if self._died.is_set() else "no process serves this subsim"
-        return SubsimDied("no_responder", reason, self.name, cmd)
+        return self._died_error(reason, cmd)
+
+    def _died_error(self, reason: str, cmd: str) -> SubsimDied:
+        status = None if self.exit_status is None else self.exit_status()
+        return SubsimDied("no_responder", reason if status is None else f"{reason}: {status}", self.name, cmd)
 
     def close(self) -> None:
         for entity in (self._querier, self._liveliness):
