@@ -226,7 +226,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--run-id", type=_run_id, help="run id that namespaces every key (default: a fresh one)")
     r.add_argument("--attach-wait", type=float, default=300.0, metavar="S",
                    help="seconds to wait for each external subsim (default: 300)")
-    r.add_argument("--quiet", action="store_true", help="no progress display")
+    r.add_argument("--quiet", action="store_true",
+                   help="no progress display, and the subsims started do not announce themselves")
     r.add_argument("--restarts", type=int, metavar="N",
                    help="replace subsims that die or hang up to N times, restoring their committed state "
                         "(default: the scenario's [run] restarts, 2; 0 stops the run at the first failure)")

@@ -223,6 +223,7 @@ class Bus:
     private_dir: str | None = None  # the 0700 directory of a PRIVATE endpoint's socket, removed on close
     names: tuple[str, ...] | None = None  # the subsims this run may have, each with its own login (None: shared)
     search_path: tuple[str, ...] | None = None  # its scenario's module directories (None: every one loaded so far)
+    announce: bool = True  # the subsims it starts say "serving run ... (pid N)" (cosim run --quiet: they do not)
     _spawned_as: dict[str, tuple[str, str | None, float | None, Elsewhere | None]] = field(default_factory=dict,
                                                                                          repr=False)
     _generation: dict[str, int] = field(default_factory=dict, repr=False)  # replacements respawn started, by name
@@ -322,7 +323,8 @@ class Bus:
                              "other one its own name (or respawn it)")
         self._spawned_as[name] = (module, model, lease, elsewhere)  # for respawn, even if this start fails
         there = {} if elsewhere is None else {"endpoint": elsewhere.connect, "python": elsewhere.python}
-        argv = [*self.command(module, name, model, lease=lease, **there), "--quiet-stop"]
+        argv = [*self.command(module, name, model, lease=lease, **there), "--quiet-stop",
+                *([] if self.announce else ["--quiet-start"])]
         if elsewhere is None:
             env = {**os.environ, **secrets}
             env.setdefault("PYTHONUNBUFFERED", "1")

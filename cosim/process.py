@@ -87,6 +87,8 @@ def parse_args(model_cls: type[Subsim] | Subsim, argv: Sequence[str] | None,
                    help="seconds to wait for the coordinator (a signal during the wait ends the process after it)")
     p.add_argument("--history", type=_count, default=DEFAULT_HISTORY, help="committed states kept for rollback")
     p.add_argument("--lease", type=_seconds, default=10.0, help="seconds a silent link to the coordinator lives")
+    p.add_argument("--quiet-start", action="store_true",
+                   help="do not announce the start ('serving run ...'): cosim run --quiet passes it")
     p.add_argument("--quiet-stop", action="store_true",
                    help="say nothing when the coordinator ends the run (cosim run passes it to the subsims it "
                         "starts: it reports the stop itself, in one line)")
@@ -210,7 +212,8 @@ def main(model_cls: type[Subsim] | Subsim, argv: Sequence[str] | None = None, pr
                                             f"{SECRET_ENV} the one the coordinator printed for run {args.run}?"),
             )
             threading.Thread(target=_watch_router, args=(session,), daemon=True, name="router-watch").start()
-            say(f"{args.name}: serving run {args.run} via {args.connect} (pid {os.getpid()})")
+            if not args.quiet_start:
+                say(f"{args.name}: serving run {args.run} via {args.connect} (pid {os.getpid()})")
             server.serve()
             if not args.quiet_stop:
                 say(f"{args.name}: shutdown requested by the coordinator")

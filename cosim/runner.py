@@ -126,13 +126,15 @@ def open_session(
     timeout: float = 120.0,
     security: Security | None = None,
     run_id: str | None = None,
+    announce: bool = True,
 ) -> Session:
     """Launch (or attach to) and configure every subsim. The caller must ``close()`` the session.
 
     ``security``: TLS and login files (else the scenario's ``[security]`` table, else loopback defaults).
     An external subsim is waited for up to ``external_wait`` seconds; for each, ``log`` gets one
     machine-readable line first: ``cosim-attach {"endpoint": ..., "run": ..., "name": ..., "command": [...],
-    "env": {...}}``. ``run_id`` fixes the run id (default: a fresh one) so that a launcher knows it in advance."""
+    "env": {...}}``. ``run_id`` fixes the run id (default: a fresh one) so that a launcher knows it in advance.
+    ``announce``: each subsim started says "serving run ... (pid N)" on stderr."""
     handles: dict[str, SubsimHandle] = {}
     bus = None
     away: dict[str, Elsewhere] = {}  # the subsims started on other machines, each with the endpoint it is given
@@ -155,6 +157,7 @@ def open_session(
         except (ValueError, RuntimeError) as exc:  # bad --listen or security files; port taken
             raise ScenarioError(f"cannot open the bus: {exc}") from None
         bus.search_path = scenario.search_path  # its subsims import its modules, not another scenario's
+        bus.announce = announce
         for name, how in away.items():  # each told the endpoint its machine reaches
             try:
                 away[name] = replace(how, connect=endpoint_for(how, str(listen), bus.endpoint))
@@ -333,7 +336,8 @@ def run_scenario(
     """Run ``scenario``. ``overwrite=False`` refuses an existing result (OutputError) before anything is
     launched; ``restarts`` and ``timeout`` override its [run] table (see ``cosim.scenario.KEYS``). ``resume``:
     go on with the interrupted run that wrote ``output``, from its latest resume point (:mod:`cosim.resume`).
-    ``record=False``: no result file and no resume point; the intervals reach ``on_interval`` only."""
+    ``record=False``: no result file and no resume point; the intervals reach ``on_interval`` only. ``progress``:
+    the progress display, and the subsims started say "serving run ... (pid N)"."""
     if resume and not record:
         raise ValueError("resume goes on with a run's result file: it needs record=True")
     method = method or scenario.default_method
@@ -347,7 +351,7 @@ def run_scenario(
         if saved is None and record:
             resume_path(output).unlink(missing_ok=True)  # an older run's: not this one's
         session = open_session(scenario, inprocess=inprocess, listen=listen, log=log, security=security,
-                               run_id=run_id, external_wait=attach_wait)
+                               run_id=run_id, external_wait=attach_wait, announce=progress)
     except BaseException:
         if lock is not None:
             lock.release()
