@@ -13,7 +13,7 @@ from cosim import __version__, interrupt
 from cosim.console import say
 from cosim.contract import SubsimError
 from cosim.coupler.couplings import TransformError
-from cosim.coupler.relaxation import METHODS, Interval, NotConverged
+from cosim.coupler.relaxation import METHODS, Interval, NotConverged, Settings
 from cosim.outputs import OutputError, OutputWriteError, resume_path
 from cosim.preflight import UsageError, check_listen, check_run_options, check_stop, zenoh_error_line
 from cosim.protocol.keys import check_name
@@ -165,9 +165,10 @@ def _describe(args: argparse.Namespace) -> int:
             print(f"held inputs: {'; '.join(f'{k} = {list(v)}' for k, v in held.items())}")
         for method in METHODS:
             st = scenario.settings_for(method)
-            line = f"{method}: H = {st.interval:g}, {st.samples} samples, tol {st.tol.rel:g}/{st.tol.abs:g}, " \
-                   f"first guess {st.first_guess}, interp {st.interp}"
-            print(line)
+            print(f"{method}: {_interval_text(st)}, {st.samples} samples, tol {st.tol.rel:g}/{st.tol.abs:g}, "
+                  f"first guess {st.first_guess}, interp {st.interp}, at most {st.max_stages} stages"
+                  + (f", {st.max_halvings} halvings" if st.max_halvings else "")
+                  + (", speculate" if st.speculate and method == "distributed" else ""))
             if method == "distributed":
                 plan = session.plans[method]
                 given = "given" if st.order is not None else "derived"
@@ -181,6 +182,14 @@ def _describe(args: argparse.Namespace) -> int:
     finally:
         session.close()
     return 0
+
+
+def _interval_text(settings: Settings) -> str:
+    auto = settings.auto
+    if auto is None:
+        return f"H = {settings.interval:g}"
+    return (f"H = auto from {auto.initial:g} in [{auto.minimum:g}, {auto.maximum:g}], interval_tol {auto.tol:g}, "
+            f"grows below {auto.stages} stages")
 
 
 def _serve(args: argparse.Namespace) -> int:

@@ -206,7 +206,7 @@ class Coordinator:
     def _relaxation(self) -> Relaxation:
         # one machine for the coordinator's life: it keeps the previous interval for the first guess
         if self._machine is None:
-            self._machine = Relaxation(self.plan, self.settings, report_stages=True)
+            self._machine = Relaxation(self.plan, self.settings)
         self._machine.report_stages = self.on_stage is not None
         return self._machine
 

@@ -187,6 +187,23 @@ def test_describe_prints_order_and_feedback_edges() -> None:
     assert "concurrent groups" not in done.stdout  # mass2 reads mass1 in the same stage
 
 
+def test_describe_tells_an_automatic_interval_from_a_fixed_one() -> None:
+    """case1-auto's intervals are sized by the coupler: describe says so, with the controller's bounds, where it
+    printed the first interval's 0.4 s as if it were fixed; and the stage limit and speculation of case 1."""
+    satellite = Path(__file__).resolve().parents[1] / "scenarios" / "satellite"
+    auto = subprocess.run([*COSIM, "describe", str(satellite / "case1-auto.toml")], capture_output=True, text=True,
+                          timeout=60)
+    assert auto.returncode == 0, auto.stderr
+    assert ("distributed: H = auto from 0.4 in [0.4, 25.6], interval_tol 7e-14, grows below 3 stages, 129 samples, "
+            "tol 1e-14/1e-10, first guess extrapolate, interp cubic, at most 100 stages\n") in auto.stdout
+    fixed = subprocess.run([*COSIM, "describe", str(satellite / "case1.toml")], capture_output=True, text=True,
+                           timeout=60)
+    assert ("distributed: H = 0.4, 5 samples, tol 1e-14/1e-14, first guess zero, interp linear, at most 100 stages, "
+            "speculate\n") in fixed.stdout
+    assert "centralized: H = 0.4, 5 samples, tol 1e-12/1e-12, first guess zero, interp linear, at most 100 stages\n" \
+        in fixed.stdout  # speculation is the distributed method's only
+
+
 def test_describe_prints_the_groups_of_subsims_that_run_side_by_side(tmp_path: Path) -> None:
     lines = ['name = "line4"', "stop = 1.0", "[coupling]", 'method = "distributed"', "interval = 0.1"]
     for i in range(4):

@@ -176,7 +176,7 @@ def test_first_guess_policies() -> None:
 @pytest.mark.parametrize(
     ("field", "value"),
     [("method", "jacobi"), ("interval", 0.0), ("samples", 1), ("first_guess", "x"), ("interp", "spline"),
-     ("max_stages", 1), ("max_halvings", -1)],
+     ("max_stages", 1), ("max_halvings", -1), ("tol", 1e-10), ("tolerances", {"a.x": 1e-10})],
 )
 def test_settings_reject_bad_values_naming_the_field(field: str, value) -> None:
     with pytest.raises(ValueError, match=field):

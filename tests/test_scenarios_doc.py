@@ -1,7 +1,7 @@
 """docs/scenarios.md documents every key of cosim.scenario.KEYS and no other.
 
 The key tables between the ``<!-- keys -->`` markers are generated: on a mismatch the assertion shows
-the text to paste (or run ``python tests/test_scenarios_doc.py``).
+the text to paste (``python tests/test_scenarios_doc.py`` prints it, ``... --write`` puts it in the page).
 """
 
 from __future__ import annotations
@@ -82,5 +82,14 @@ def test_the_toml_examples_use_only_keys_the_loader_knows(tmp_path: Path) -> Non
     assert [str(c) for c in load(example).couplings] == ["mass2.u -> mass1.F", "mass1.u -> mass2.F"]
 
 
-if __name__ == "__main__":
-    print(render())
+if __name__ == "__main__":  # python tests/test_scenarios_doc.py [--write]
+    import sys
+
+    if sys.argv[1:] == ["--write"]:
+        text = DOC.read_text()
+        found = MARKED.search(text)
+        assert found, "docs/scenarios.md lost its <!-- keys --> ... <!-- /keys --> markers"
+        DOC.write_text(text[:found.start(1)] + render() + text[found.end(1):])
+        print(f"regenerated the key tables of {DOC}")
+    else:
+        print(render())

@@ -93,6 +93,12 @@ class Settings:
         if self.interp not in SCHEMES:
             raise ValueError(f"interp must be one of {', '.join(SCHEMES)}, got {self.interp!r}")
         check_scheme(self.interp, self.samples)
+        if not isinstance(self.tol, Tolerance):  # a bare number would fail only at the first check, deep inside
+            raise ValueError(f"tol must be a Tolerance(rel, abs), got {self.tol!r}")
+        bad = [k for k, v in dict(self.tolerances).items() if not isinstance(v, Tolerance)]
+        if bad:
+            raise ValueError(f"tolerances must map signal names to Tolerance(rel, abs); {bad[0]!r} maps to "
+                             f"{dict(self.tolerances)[bad[0]]!r}")
         if not _whole(self.max_stages, 2):
             raise ValueError(f"max_stages must be an integer >= 2, got {self.max_stages!r}")
         if not _whole(self.max_halvings, 0):
@@ -406,17 +412,17 @@ class Relaxation:
         sources = {(s.subsim, s.port) for name in readers for c in self.plan.forward_into[name] for s in c.sources}
         return tuple(sorted(src for src in sources if src[0] in level))
 
-    def _ahead(self, i: int, stage: int, previous: Outputs | None, outputs: Outputs, inputs: dict[str, np.ndarray],
+    def _ahead(self, i: int, stage: int, last_stage: Outputs | None, outputs: Outputs, inputs: dict[str, np.ndarray],
                n: int) -> tuple[tuple[str, ...], dict[str, np.ndarray]] | None:
         """Level i + 1 and its inputs on level i's outputs of the previous stage, when it is worth running it beside
         level i; else None. A miss is tried again after ``RETRY_MISSED`` interval tries."""
         levels = self.plan.levels
-        if not self.settings.speculate or previous is None or i + 1 >= len(levels):
+        if not self.settings.speculate or last_stage is None or i + 1 >= len(levels):
             return None
         missed = self._missed.get((i, stage))
         if missed is not None and self._tries - missed < RETRY_MISSED:
             return None
-        seen = {**outputs, **{name: previous[name] for name in levels[i]}}
+        seen = {**outputs, **{name: last_stage[name] for name in levels[i]}}
         ahead = dict(inputs)
         try:
             for name in levels[i + 1]:
@@ -426,9 +432,9 @@ class Relaxation:
             return None
         return levels[i + 1], ahead
 
-    def _repeated(self, i: int, outputs: Outputs, previous: Outputs) -> bool:
+    def _repeated(self, i: int, outputs: Outputs, last_stage: Outputs) -> bool:
         """Whether level i gave, bit for bit, the outputs of the previous stage that level i + 1 reads."""
-        return all(outputs[name][port].tobytes() == previous[name][port].tobytes()
+        return all(outputs[name][port].tobytes() == last_stage[name][port].tobytes()
                    for name, port in self._read_ahead[i])
 
     def _run_changed(self, stage: int, times: np.ndarray, runs: dict[str, dict[str, np.ndarray]],
@@ -462,7 +468,7 @@ class Relaxation:
         n, s, plan = times.size, self.settings, self.plan
         inputs = self._guess(times, self._all)
         history: dict[str, list[float]] = {}
-        previous: dict[str, np.ndarray] | None = None
+        last_stage: dict[str, np.ndarray] | None = None  # the flat outputs of the stage before, for the check
         latest: Latest = {}
         for stage in range(s.max_stages):
             runs = {name: self._inputs_of(name, inputs, n) for name in plan.names}
@@ -470,11 +476,11 @@ class Relaxation:
             if self.report_stages:
                 yield StageDone(stage, outputs)
             flat = {f"{name}.{p}": v for name, ports in outputs.items() for p, v in ports.items()}
-            if previous is not None:
-                result = self._check(flat, previous, history)
+            if last_stage is not None:
+                result = self._check(flat, last_stage, history)
                 if result.converged:
                     return Interval(times, outputs, inputs, stage + 1, history)
-            previous = flat
+            last_stage = flat
             inputs = {k: c.evaluate(outputs, w, n) for k, c, w in self._all}
         raise NotConverged(float(times[0]), float(times[-1]), s.max_stages, result.failing, history)
 
@@ -483,7 +489,7 @@ class Relaxation:
         forward_into = self._forward_into
         fed_back = self._guess(times, self._feedback)
         history: dict[str, list[float]] = {}
-        previous: Outputs | None = None  # the previous stage's outputs
+        last_stage: Outputs | None = None  # the outputs of the stage before (self._previous: of the interval before)
         self._tries += 1
         latest: Latest = {}
         for stage in range(s.max_stages):
@@ -496,21 +502,21 @@ class Relaxation:
                     for k, c, w in forward_into[name]:
                         inputs[k] = c.evaluate(outputs, w, n)
                 runs = {name: self._inputs_of(name, inputs, n) for name in level}
-                ahead = self._ahead(i, stage, previous, outputs, inputs, n)
+                ahead = self._ahead(i, stage, last_stage, outputs, inputs, n)
                 if ahead is not None:
                     runs.update({name: self._inputs_of(name, ahead[1], n) for name in ahead[0]})
                 got = yield from self._run_changed(stage, times, runs, latest)
                 outputs.update({name: got[name] for name in level})
                 i += 1
                 if ahead is not None:
-                    assert previous is not None
-                    if self._repeated(i - 1, outputs, previous):  # the inputs it ran on were the in-order ones
+                    assert last_stage is not None
+                    if self._repeated(i - 1, outputs, last_stage):  # the inputs it ran on were the in-order ones
                         outputs.update({name: got[name] for name in ahead[0]})
                         inputs = ahead[1]
                         i += 1
                     else:  # run it again, in order, on this stage's outputs
                         self._missed[(i - 1, stage)] = self._tries
-            previous = outputs
+            last_stage = outputs
             if self.report_stages:
                 yield StageDone(stage, outputs)
             if not plan.feedback:  # nothing to iterate: a feed-forward chain is exact in one stage
