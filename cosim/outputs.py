@@ -10,6 +10,9 @@ into different files (or formats) never share one:
   killed;
 * ``x.csv.lock`` / ``x.npz.lock``: held (``flock``) by the run writing the file, with its pid inside.
 
+A new run writes them under staged names (``.x.csv.staged.tmp-<pid>``) until its first interval is in, so a run
+that stops before then leaves the files as they were (a result ``--overwrite`` was to replace included).
+
 The lock is an OS lock, so a run that died (even by SIGKILL) holds nothing: its lock file is taken
 over by the next run.
 """
@@ -52,6 +55,22 @@ def stream_path(path: Path) -> Path:
 def resume_path(path: Path) -> Path:
     """Where an interrupted run's latest resume point is kept (``cosim.resume``)."""
     return path.with_name(path.name + ".resume.npz")
+
+
+STAGED = ".staged.tmp-"  # what a run writes before its first interval is in (removed as stale like atomic writes')
+
+
+def staged(path: Path) -> Path:
+    """Where a new run writes ``path`` until its first interval is written (``.x.csv.staged.tmp-<pid>``)."""
+    return path.with_name(f".{path.name}{STAGED}{os.getpid()}")
+
+
+def unstaged(path: Path) -> Path:
+    """The real name of a :func:`staged` one (any other name is its own)."""
+    name = path.name
+    if name.startswith(".") and STAGED in name:
+        return path.with_name(name[1:name.index(STAGED)])
+    return path
 
 
 def lock_path(path: Path) -> Path:
@@ -157,7 +176,7 @@ def reserve_output(path: Path, overwrite: bool = False) -> OutputLock:
                           "choose another --output") from None
     lock = OutputLock.acquire(path)
     try:
-        for stale in path.parent.glob(f".{path.name}*.tmp-*"):  # an atomic write's, cut short by a SIGKILL
+        for stale in path.parent.glob(f".{path.name}*.tmp-*"):  # an atomic write's or a staged file, left by a kill
             stale.unlink(missing_ok=True)  # (the lock is ours: no run writes these files now)
         if not overwrite:  # the result, and its companions too (diagnostics, units, an NPZ's stream)
             for f in run_files(path):

@@ -19,6 +19,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+import os
 import warnings
 from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
@@ -41,9 +42,11 @@ from cosim.outputs import (
     read_stream,
     reserve_output,
     run_files,
+    staged,
     stream_head,
     stream_header,
     stream_path,
+    unstaged,
     write_npz,
 )
 
@@ -78,6 +81,10 @@ def output_units(descriptions: Mapping[str, Description]) -> dict[str, str]:
 class ResultWriter:
     """Streams committed intervals to ``path`` (.csv or .npz) and its diagnostics file.
 
+    A new run's files are written under staged names (:func:`staged`) until its first interval is in them, and
+    only then take the real names: a run that stops before that (a bad setting, an interval that does not
+    converge, a kill) leaves what was there, a previous run's results replaced by ``--overwrite`` included.
+
     ``lock``: the :class:`~cosim.outputs.OutputLock` taken (with the checks) before the run launched
     anything; without one the writer takes it itself (replacing an existing file). The lock is released
     by :meth:`close`.
@@ -100,30 +107,50 @@ class ResultWriter:
         self._count = 0
         self._data: AppendFile | None = None
         self._diag: AppendFile | None = None
+        self._staged: list[Path] = []  # the final names of the files written under staged names so far
         if resume_at is not None:
             self._resume(resume_at)
             return
         try:
             if self._npz:
-                self._data = AppendFile(stream_path(self.path), "the NPZ's streamed samples")
+                self._data = AppendFile(self._stage(stream_path(self.path)), "the NPZ's streamed samples")
                 self._data.append(stream_header(self.columns, self.units))
             else:
                 meta = {"format": "cosim results", "columns": self.columns, "units": self.units}
-                atomic_write(meta_path(self.path), lambda f: f.write(json.dumps(meta, indent=1).encode() + b"\n"))
-                self._data = AppendFile(self.path, "results")
+                atomic_write(self._stage(meta_path(self.path)),
+                             lambda f: f.write(json.dumps(meta, indent=1).encode() + b"\n"))
+                self._data = AppendFile(self._stage(self.path), "results")
                 self._data.append(_csv_header(self.columns).encode())
-            self._diag = AppendFile(diag_path(self.path), "diagnostics")
+            self._diag = AppendFile(self._stage(diag_path(self.path)), "diagnostics")
             self._diag.append((",".join(DIAG_COLUMNS) + "\n").encode())
         except BaseException:  # nothing of this run is in the files yet: leave none behind
             self.failed = True
             self._close_files()
-            for f in (self._data, self._diag):
-                if f is not None:
-                    f.path.unlink(missing_ok=True)
-            if not self._npz:
-                meta_path(self.path).unlink(missing_ok=True)
+            self._drop_staged()
             self._lock.release()
             raise
+
+    def _stage(self, path: Path) -> Path:
+        self._staged.append(path)
+        return staged(path)
+
+    def _drop_staged(self) -> None:
+        for path in self._staged:
+            staged(path).unlink(missing_ok=True)
+        self._staged.clear()
+
+    def _promote(self) -> None:
+        """The staged files take their real names; what a previous run left under them and this run does not
+        write again (its resume point, an NPZ this run builds at its end) goes."""
+        for path in self._staged:
+            os.replace(staged(path), path)
+        for f in (self._data, self._diag):
+            if f is not None:
+                f.path = unstaged(f.path)
+        for path in run_files(self.path):
+            if path not in self._staged:
+                path.unlink(missing_ok=True)
+        self._staged.clear()
 
     def _resume(self, t: float) -> None:
         data = stream_path(self.path) if self._npz else self.path
@@ -213,11 +240,15 @@ class ResultWriter:
                         f"{interval.largest_residual:.6e}", f"{interval.wall_time:.6f}", interval.halvings,
                         interval.restarts, repr(float(t[-1] - t[0])), f"{interval.error:.3e}"]
                 self._diag.append((",".join(map(str, line)) + "\n").encode(), self._ends_at)
+                if self._staged:  # the first interval is in: the files are this run's now
+                    self._promote()
             except OutputWriteError:
                 self.failed = True
                 raise
 
     def _ends_at(self) -> str:
+        if self._staged:
+            return "no interval written"
         where = "no samples written" if self.t_last is None else f"results end at t = {self.t_last:.6g} s"
         if self._npz:
             where += f", kept in {stream_path(self.path)} (`cosim recover {self.path}` builds the NPZ)"
@@ -226,15 +257,16 @@ class ResultWriter:
     def close(self, failed_run: bool = False) -> None:
         """Finish every file (the NPZ from its stream, atomically) and release the lock. After a write
         error the NPZ is not attempted: its stream stays for ``cosim recover``. ``failed_run``: the run stopped
-        on an error; if it committed no interval, its files (headers only) are removed, so that running it
-        again after a fix needs no ``--overwrite``."""
+        on an error; if it committed no interval, its staged files are removed (what was there stays), so that
+        running it again after a fix needs no ``--overwrite``."""
         with interrupt.deferred():
             try:
                 self._close_files()
                 if failed_run and self._count == 0 and not self._resumed:
-                    for path in run_files(self.path):
-                        path.unlink(missing_ok=True)
+                    self._drop_staged()
                     return
+                if self._staged:  # a run that ended without an interval (nothing to do): its files all the same
+                    self._promote()
                 if self._npz and not self.failed:
                     _, _, data = read_stream(stream_path(self.path))
                     try:

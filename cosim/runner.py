@@ -348,8 +348,6 @@ def run_scenario(
     key = fingerprint(scenario.raw, method)  # what a resume point of this run is saved under
     try:
         saved = _resume_point(scenario, method, key, output, stop) if resume else None
-        if saved is None and record:
-            resume_path(output).unlink(missing_ok=True)  # an older run's: not this one's
         session = open_session(scenario, inprocess=inprocess, listen=listen, log=log, security=security,
                                run_id=run_id, external_wait=attach_wait, announce=progress)
     except BaseException:

@@ -87,6 +87,36 @@ def test_a_transform_failing_in_a_run_stops_it_in_one_line_keeping_what_was_comm
         assert sorted(p.name for p in tmp_path.iterdir() if p.name.startswith("x.")) == []
 
 
+@pytest.mark.parametrize("suffix", [".csv", ".npz"])
+def test_an_overwrite_that_fails_before_its_first_interval_keeps_the_results_it_was_to_replace(
+        tmp_path: Path, suffix: str) -> None:
+    """--overwrite of good results by a run that stops in its first interval (it cannot converge): the good files
+    stay as they were, byte for byte (they were gone), and no staged file is left. The interrupted run's resume
+    point stays too; once a run's first interval is in, the files are the new run's."""
+    out = tmp_path / f"x{suffix}"
+
+    def run(scenario: Path, *extra: str) -> subprocess.CompletedProcess:
+        return subprocess.run([*COSIM, "run", str(scenario), "--inprocess", "--quiet", "--output", str(out), *extra],
+                              capture_output=True, text=True, timeout=120)
+
+    done = run(OSCILLATOR, "--stop", "0.2")
+    assert done.returncode == 0, done.stderr
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    assert len(before) == (2 if suffix == ".npz" else 3), sorted(before)  # results, diagnostics (, units)
+    (tmp_path / f"x{suffix}.resume.npz").write_bytes(b"an interrupted run's")  # (it would be replaced too)
+    before[f"x{suffix}.resume.npz"] = b"an interrupted run's"
+    bad = tmp_path / "bad.toml"
+    bad.write_text(OSCILLATOR.read_text().replace("max_stages = 50", "max_stages = 2", 1))
+    done = run(bad, "--stop", "0.2", "--overwrite")
+    assert done.returncode == 1 and "did not converge in 2 stages" in done.stderr, done.stderr
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir() if p != bad} == before
+    done = run(OSCILLATOR, "--stop", "0.1", "--overwrite")
+    assert done.returncode == 0, done.stderr
+    after = {p.name for p in tmp_path.iterdir() if p != bad}
+    assert after == set(before) - {f"x{suffix}.resume.npz"}, after  # a finished run leaves no resume point
+    assert out.read_bytes() != before[out.name]  # the new, shorter run's
+
+
 def test_an_input_fed_by_no_coupling_is_refused_unless_held(tmp_path: Path) -> None:
     text = OSCILLATOR.read_text()
     cut = text.index('[[couplings]]\nto = "mass2.F"')
