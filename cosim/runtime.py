@@ -40,7 +40,26 @@ def _model_exception(where: str, exc: BaseException) -> CosimError:
     """A model's unexpected exception as an error that names it in one line, with the line of the model's own
     code it came from (a test's failure shows where), and carries the model's own frames."""
     line = _model_line(exc)
-    return CosimError("model_exception", f"{where}() raised {type(exc).__name__}: {exc}{line}", _model_frames(exc))
+    hint = ""
+    if isinstance(exc, ValueError) and "read-only" in str(exc):  # numpy's words for a write into the state given
+        hint = ": the state and inputs advance() is given are read-only; change a copy (x = state.copy())"
+    return CosimError("model_exception", f"{where}() raised {type(exc).__name__}: {exc}{line}{hint}",
+                      _model_frames(exc))
+
+
+ATTRIBUTES_WATCHED = 3  # run_intervals after a configure whose model attributes are compared before and after
+
+
+def _attribute_marks(model: object) -> dict[str, Any]:
+    """What tells an attribute changed: the object itself, an array's bytes (cheap, and shallow: a list appended to
+    in place goes unseen; ``cosim.check_pure`` compares deep copies)."""
+    return {k: v.tobytes() if isinstance(v, np.ndarray) else v for k, v in vars(model).items()}
+
+
+def _changed_attributes(before: Mapping[str, Any], after: Mapping[str, Any]) -> list[str]:
+    return sorted(k for k in set(before) | set(after)
+                  if k not in before or k not in after or not (before[k] is after[k] or (
+                      isinstance(before[k], bytes) and before[k] == after[k])))
 
 
 def _model_line(exc: BaseException) -> str:
@@ -104,6 +123,7 @@ class Runtime:
         self.epoch = 0
         self.requests = 0
         self.shutdown_requested = False
+        self._attributes_watched = 0  # run_intervals left whose model attributes are compared (set by configure)
         # told of every error the model caused (model_error, model_exception), e.g. to show it to the model's
         # owner at the subsim's own terminal as well as in the coordinator's reply
         self.on_model_error: Callable[[str, CosimError], None] | None = None
@@ -182,6 +202,7 @@ class Runtime:
         self.model, self.inputs, self.outputs = model, inputs, outputs
         self._set_committed(t0, state)
         self.history.clear()
+        self._attributes_watched = ATTRIBUTES_WATCHED
         return self.describe()
 
     def run_interval(self, t: Any, inputs: Mapping[str, Any], interp: str = "linear", commit: bool = False) -> dict:
@@ -207,12 +228,22 @@ class Runtime:
         except ValueError as exc:
             raise CosimError("bad_value", f"interp: {exc}") from None
         u = self._input_function(times, inputs, interp)
+        watched = self._attributes_watched > 0 and hasattr(self.model, "__dict__")
+        before = _attribute_marks(self.model) if watched else None
         try:
             result = self.model.advance(state, times, u)
         except ModelError as exc:
             raise CosimError("model_error", f"at t in [{times[0]}, {times[-1]}]: {exc}") from None
         except Exception as exc:
             raise _model_exception("advance", exc) from None
+        if before is not None:
+            self._attributes_watched -= 1
+            changed = _changed_attributes(before, _attribute_marks(self.model))
+            if changed:  # what evolves there is not rolled back, and a repeated stage integrates it again
+                raise CosimError("model_error", f"advance() changed the model's attribute(s) {changed} (over t in "
+                                 f"[{times[0]:g}, {times[-1]:g}]): what evolves belongs in the state vector, which "
+                                 "a rollback or a repeated stage restores; advance() must depend on its arguments "
+                                 "only (cosim.check_pure tests that)")
         if type(result) is not tuple or len(result) != 2:
             got = f"a tuple of {len(result)}" if isinstance(result, tuple) else type(result).__name__
             raise CosimError("model_error", f"advance() must return (outputs, end_state), got {got}")

@@ -81,7 +81,7 @@ KEYS: dict[str, dict[str, Key]] = {
     },
     "coupling": {
         "method": Key("string", '"centralized"', "", "default method: 'centralized' (RF-C) or 'distributed' (RF-D)"),
-        "interval": Key("number or \"auto\"", "1.0", "s",
+        "interval": Key("number or \"auto\"", "required", "s",
                         "convergence interval length H; 'auto': sized per interval by the interval_* keys "
                         "(cosim/coupler/interval_control.py)"),
         "interval_tol": Key("number", "1e-8", "1",
@@ -144,6 +144,9 @@ KEYS: dict[str, dict[str, Key]] = {
     },
 }
 KEYS["coupling.<method>"] = {k: v for k, v in KEYS["coupling"].items() if k != "method"}
+INTERVAL_REQUIRED = ("is required: the convergence interval in s, short against the fastest coupled dynamics (a tenth "
+                     "of the shortest period is a start; a run converges at any length, but the signals between "
+                     "samples are only interpolated), or interval = \"auto\" to have each one sized to interval_tol")
 AUTO_KEYS = ("interval_tol", "interval_initial", "interval_min", "interval_max", "interval_stages")
 TABLES = {"coupling", "subsims", "couplings", "tolerances", "output", "unified", "run", "security"}
 
@@ -437,11 +440,15 @@ class _Parser:
         default_method = base.get("method", "centralized")
         if default_method not in METHODS:
             raise self.fail("coupling.method", f"must be one of {METHODS}, got {default_method!r}")
-        self.method_settings(base, "centralized", tolerances, subsims, "coupling")  # valid on its own
         settings = {}
         for method in METHODS:
             over = self.table(table, method, f"coupling.{method}")
             self.known(over, set(KEYS["coupling.<method>"]), f"coupling.{method}")
+            if "interval" not in base and "interval" not in over:  # no default fits every model: a wrong one is
+                raise self.fail("coupling.interval", INTERVAL_REQUIRED)  # silently inaccurate, not an error
+        self.method_settings(base, "centralized", tolerances, subsims, "coupling")  # valid on its own
+        for method in METHODS:
+            over = self.table(table, method, f"coupling.{method}")
             settings[method] = self.method_settings({**base, **over}, method, tolerances, subsims, f"coupling.{method}")
         return settings, default_method
 

@@ -143,3 +143,101 @@ def test_an_exception_in_the_constructor_at_configure_is_the_models_and_changes_
     assert "in __init__" in err.value.traceback
     state = h.get_state()
     assert (state.time, state.state.tolist()) == (0.0, [3.0])
+
+
+class _Drifting(Subsim):
+    """A newcomer's model: the wheel momentum kept on ``self`` instead of in the state vector. Every stage and every
+    replay integrates it again (a coupled run's results were 3x off, exit 0)."""
+
+    inputs = {"u": Port(1)}
+    outputs = {"h": Port(1)}
+
+    def __init__(self) -> None:
+        self.h = 0.0
+
+    def initial_state(self, params):
+        return np.zeros(1)
+
+    def advance(self, state, times, u):
+        self.h = self.h + float(times[-1] - times[0])
+        return {"h": np.full((times.size, 1), self.h)}, state
+
+
+class _Lagging(Subsim):
+    """Keeps an array attribute and writes into it in place (the same mistake, an ndarray)."""
+
+    inputs = {"u": Port(1)}
+    outputs = {"x": Port(1)}
+
+    def __init__(self) -> None:
+        self.last = np.zeros(1)
+
+    def initial_state(self, params):
+        return np.zeros(1)
+
+    def advance(self, state, times, u):
+        self.last[0] = times[-1]
+        return {"x": np.zeros((times.size, 1))}, state
+
+
+class _Cached(Subsim):
+    """Builds a cache in its constructor and only reads it in advance: pure, and not refused."""
+
+    inputs = {"u": Port(1)}
+    outputs = {"x": Port(1)}
+
+    def __init__(self) -> None:
+        self.table = np.arange(3.0)
+
+    def initial_state(self, params):
+        return np.zeros(1)
+
+    def advance(self, state, times, u):
+        return {"x": np.full((times.size, 1), self.table[1])}, state
+
+
+@pytest.mark.parametrize("model", [_Drifting, _Lagging])
+def test_a_model_that_keeps_run_state_in_its_attributes_is_refused_by_name(model: type[Subsim]) -> None:
+    h = InProcessHandle(model(), "m")
+    h.configure({})
+    t = np.linspace(0.0, 0.4, 3)
+    with pytest.raises(SubsimError) as err:
+        h.run_interval(t, {"u": np.zeros((3, 1))})
+    assert err.value.code == "model_error", err.value
+    name = "h" if model is _Drifting else "last"
+    assert f"advance() changed the model's attribute(s) ['{name}'] (over t in [0, 0.4]): what evolves belongs in the " \
+           "state vector" in str(err.value)
+    assert h.status()["time"] == 0.0  # nothing committed
+
+
+def test_a_model_that_only_reads_its_attributes_runs() -> None:
+    h = InProcessHandle(_Cached(), "m")
+    h.configure({})
+    for i in range(5):
+        out = h.run_interval(np.linspace(0.4 * i, 0.4 * (i + 1), 3), {"u": np.zeros((3, 1))}, commit=i > 0)
+        assert out.outputs["x"][0, 0] == 1.0
+
+
+class _InPlace(Subsim):
+    """Changes the state it is given in place: numpy says 'output array is read-only', and nothing else."""
+
+    inputs = {"u": Port(1)}
+    outputs = {"x": Port(1)}
+
+    def initial_state(self, params):
+        return np.zeros(1)
+
+    def advance(self, state, times, u):
+        x = state
+        x += 1.0
+        return {"x": np.zeros((times.size, 1))}, x
+
+
+def test_a_write_into_the_state_given_says_to_change_a_copy() -> None:
+    h = InProcessHandle(_InPlace(), "m")
+    h.configure({})
+    with pytest.raises(SubsimError) as err:
+        h.run_interval(np.linspace(0.0, 0.4, 3), {"u": np.zeros((3, 1))})
+    assert err.value.code == "model_exception"
+    assert str(err.value).endswith("the state and inputs advance() is given are read-only; change a copy "
+                                   "(x = state.copy())"), err.value

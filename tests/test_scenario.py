@@ -64,6 +64,9 @@ def test_good_scenario_loads_with_per_method_settings(tmp_path: Path) -> None:
         ('transform = "gain"', 'transform = "warp"', "couplings[0]", "unknown transform 'warp'"),
         ("stop = 1.0", "stop = -1.0", "stop", "after start"),
         ("stop = 1.0", "", "stop", "is required: stop = <a number>"),
+        # no interval fits every model (the old default, 1 s, ran a 0.4 s-period oscillator 6 times off, exit 0)
+        ("interval = 0.1", "", "coupling.interval", 'is required: the convergence interval in s, short against'),
+        ("interval = 0.1", "[coupling.distributed]\ninterval = 0.1", "coupling.interval", "or interval = \"auto\""),
         ("samples = 5", "sampels = 5", "coupling", "unknown key(s) ['sampels'] (did you mean 'samples'?); allowed:"),
         ("samples = 5", "sampels = 5\nmetod = 'x'", "coupling",
          "['metod', 'sampels'] (did you mean 'method' for 'metod', 'samples' for 'sampels'?)"),
