@@ -166,7 +166,8 @@ def test_a_bad_ssp_is_one_clear_line(
 def test_fmu_shorthand_resolves_against_the_scenario_and_refuses_model_too(tmp_path: Path) -> None:
     (tmp_path / "sub").mkdir()
     path = tmp_path / "sub" / "s.toml"
-    path.write_text('start = 2.0\nstop = 3.0\n[subsims.a]\nfmu = "../m.fmu"\nparams = { k = 1.0 }\n')
+    path.write_text('start = 2.0\nstop = 3.0\n[coupling]\ninterval = 0.5\n[subsims.a]\nfmu = "../m.fmu"\n'
+                    'params = { k = 1.0 }\n')
     with pytest.raises(ScenarioError) as err:  # launched on this machine: the file must be there
         load(path)
     assert str(err.value) == f"{path}: [subsims.a.fmu] no such file: {tmp_path / 'm.fmu'}"
@@ -174,10 +175,11 @@ def test_fmu_shorthand_resolves_against_the_scenario_and_refuses_model_too(tmp_p
     spec = load(path).subsims["a"]
     assert spec.model == "subsims.fmu:FmuSubsim"
     assert spec.params == {"k": 1.0, "fmu": str(tmp_path / "m.fmu"), "start_time": 2.0}
-    path.write_text('stop = 1.0\n[subsims.a]\nfmu = "m.fmu"\nmodel = "subsims.fmu:FmuSubsim"\n')
+    path.write_text('stop = 1.0\n[coupling]\ninterval = 0.5\n[subsims.a]\nfmu = "m.fmu"\n'
+                    'model = "subsims.fmu:FmuSubsim"\n')
     with pytest.raises(ScenarioError, match=r"\[subsims.a\] give fmu or model, not both"):
         load(path)
-    path.write_text('stop = 1.0\n[subsims.a]\nfmu = "elsewhere.fmu"\nexternal = true\n')
+    path.write_text('stop = 1.0\n[coupling]\ninterval = 0.5\n[subsims.a]\nfmu = "elsewhere.fmu"\nexternal = true\n')
     assert load(path).subsims["a"].params["fmu"] == str(tmp_path / "sub" / "elsewhere.fmu")  # its own copy there
 
 
