@@ -22,7 +22,7 @@ from typing import Any, NoReturn, TypeVar
 import numpy as np
 
 from cosim.contract import SubsimDied, SubsimError, SubsimHung
-from cosim.coupler.couplings import Coupling
+from cosim.coupler.couplings import Coupling, check_units
 from cosim.coupler.plan import Plan
 from cosim.coupler.relaxation import (
     Commit,
@@ -134,7 +134,10 @@ def plan_for(
     """The coupling plan of described subsims (raises ``CouplingError`` naming the first bad coupling)."""
     inputs = {n: {p: port.size for p, port in d.inputs.items()} for n, d in descriptions.items()}
     outputs = {n: {p: port.size for p, port in d.outputs.items()} for n, d in descriptions.items()}
-    return Plan.build(inputs, outputs, couplings, settings.method, settings.order)
+    plan = Plan.build(inputs, outputs, couplings, settings.method, settings.order)
+    check_units(couplings, {n: {p: port.unit for p, port in d.inputs.items()} for n, d in descriptions.items()},
+                {n: {p: port.unit for p, port in d.outputs.items()} for n, d in descriptions.items()})
+    return plan
 
 
 class Coordinator:
@@ -422,19 +425,25 @@ class Coordinator:
             try:
                 return call(self.handles[name])
             except Exception as exc:
-                if not _recoverable(exc) or self.recovery is None:
+                if not _recoverable(exc):
                     raise
-                if len(self.restarts) >= self.recovery.restarts:
+                if self.recovery is None or len(self.restarts) >= self.recovery.restarts:
                     raise self._out_of_restarts(exc) from None
                 self._replace(name, exc)
 
     def _out_of_restarts(self, exc: Exception) -> Exception:
-        """A subsim lost with every restart used: the error says so (the replacements were only logged)."""
-        if self.recovery is None or not self.recovery.restarts or not isinstance(exc, SubsimError):
+        """A subsim lost with every restart used: the error says so (the replacements were only logged), and for a
+        hung one how to wait longer, in case it was only slow."""
+        if not isinstance(exc, SubsimError):
             return exc
-        used = len(self.restarts)
-        return type(exc)(exc.code, f"{exc.message} (no restarts left: {used} of {self.recovery.restarts} used)",
-                         exc.subsim, exc.command, exc.traceback)
+        notes = []
+        if self.recovery is not None and self.recovery.restarts:
+            notes.append(f"no restarts left: {len(self.restarts)} of {self.recovery.restarts} used")
+        if isinstance(exc, SubsimHung):
+            notes.append("a model this slow at times needs a longer deadline: timeout (--timeout S, [run] timeout)")
+        if not notes:
+            return exc
+        return type(exc)(exc.code, f"{exc.message} ({'; '.join(notes)})", exc.subsim, exc.command, exc.traceback)
 
     def _replace(self, name: str, why: Exception) -> None:
         """A new process for ``name`` at its last checkpoint, with every committed interval since replayed. A

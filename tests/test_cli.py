@@ -247,3 +247,39 @@ def test_external_subsim_started_by_hand(tmp_path: Path, procs: list) -> None:
     _, data = read_results(out)
     assert data[-1, 0] == pytest.approx(0.2)
     assert user.wait(timeout=15) == 0  # it leaves when the coordinator does
+
+
+TALKY = '''
+import numpy as np
+from cosim import Port, Subsim
+
+
+class Talky(Subsim):
+    inputs = {"u": Port(1)}
+    outputs = {"x": Port(1)}
+
+    def initial_state(self, params):
+        return np.zeros(1)
+
+    def advance(self, state, times, u):
+        print(f"advancing to {times[-1]:.2f}")
+        print("in", end="")
+        print(" parts")
+        return {"x": np.zeros((times.size, 1))}, state
+'''
+
+
+@pytest.mark.zenoh
+def test_what_a_model_prints_is_on_stderr_under_its_subsims_name(tmp_path: Path) -> None:
+    """A model's print() went, unprefixed, into cosim run's standard output (its summary, which scripts read)."""
+    (tmp_path / "talky.py").write_text(TALKY)
+    (tmp_path / "s.toml").write_text('stop = 0.2\n[coupling]\ninterval = 0.1\n[subsims.a]\nmodel = "talky:Talky"\n'
+                                     '[subsims.b]\nmodel = "talky:Talky"\n[[couplings]]\nto = "a.u"\nfrom = "b.x"\n'
+                                     '[[couplings]]\nto = "b.u"\nfrom = "a.x"\n')
+    done = subprocess.run([*COSIM, "run", "s.toml", "--quiet"], capture_output=True, text=True, timeout=120,
+                          cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert "advancing" not in done.stdout and "parts" not in done.stdout, done.stdout
+    lines = done.stderr.splitlines()
+    for name in ("a", "b"):
+        assert lines.count(f"{name}: advancing to 0.10") >= 1 and f"{name}: in parts" in lines, done.stderr

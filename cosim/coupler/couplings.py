@@ -97,6 +97,9 @@ class CouplingError(ValueError):
         self.index = index
 
 
+Units = Mapping[str, Mapping[str, str]]  # subsim -> port -> unit ("": not declared)
+
+
 def check_couplings(couplings: Sequence[Coupling], inputs: Ports, outputs: Ports) -> None:
     """Every source is an existing output, every target an existing input driven at most once,
     and an identity coupling joins signals of equal size. Raises CouplingError naming the coupling."""
@@ -121,7 +124,9 @@ def _check_one(c: Coupling, inputs: Ports, outputs: Ports, driven: dict[SignalRe
             known = ", ".join(outputs[s.subsim]) or "none"
             raise ValueError(f"coupling {c}: {s.subsim!r} has no output {s.port!r} (outputs: {known})")
     if c.target in driven:
-        raise ValueError(f"input {c.target} is driven twice: by {driven[c.target]} and by {c}")
+        raise ValueError(f"input {c.target} is driven twice: by {driven[c.target]} and by {c}; to add them, give "
+                         f"one coupling every source in its from, with transform = \"linear\" (params = {{ gains = "
+                         "[...] }) or a function of your own")
     driven[c.target] = c
     if c.transform is identity:
         if len(c.sources) != 1:
@@ -131,6 +136,21 @@ def _check_one(c: Coupling, inputs: Ports, outputs: Ports, driven: dict[SignalRe
             raise ValueError(f"coupling {c}: size mismatch, output has {src}, input takes {dst}")
         return
     _try_transform(c, inputs, outputs)
+
+
+def check_units(couplings: Sequence[Coupling], inputs: Units, outputs: Units) -> None:
+    """An identity coupling joins ports of the same unit where both declare one (a transform may convert, so its
+    ports are not compared). Units are compared as written: 'rad/s' and 'deg/s' differ, so do 'm/s' and 'm s^-1'.
+    Raises CouplingError naming the coupling."""
+    for i, c in enumerate(couplings):
+        if c.transform is not identity:
+            continue
+        src = outputs[c.sources[0].subsim][c.sources[0].port]
+        dst = inputs[c.target.subsim][c.target.port]
+        if src and dst and src != dst:
+            raise CouplingError(i, f"coupling {c}: units differ, the output is in {src!r} and the input takes "
+                                f"{dst!r}: convert with a transform (transform = \"gain\", params = {{ k = ... }}) or "
+                                "declare the ports in one unit")
 
 
 def _try_transform(c: Coupling, inputs: Ports, outputs: Ports) -> None:

@@ -1,0 +1,66 @@
+"""Checks of the couplings against the subsims' declared ports, before any run: an identity coupling joins ports of
+one unit, and an input driven twice says how to add its sources."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from cosim.coupler.couplings import Coupling, CouplingError, check_couplings, check_units
+
+UNITS_IN = {"wheel": {"omega": "deg/s", "free": "", "phi": "rad"}}
+UNITS_OUT = {"att": {"omega": "rad/s", "phi": "rad", "raw": ""}}
+
+
+@pytest.mark.parametrize(("source", "target", "refused"), [
+    ("att.omega", "wheel.omega", True),   # rad/s into deg/s: a factor of 57 nobody asked for
+    ("att.phi", "wheel.phi", False),      # the same unit
+    ("att.raw", "wheel.omega", False),    # a port without a unit says nothing to compare
+    ("att.omega", "wheel.free", False),
+])
+def test_an_identity_coupling_joins_ports_of_one_unit(source: str, target: str, refused: bool) -> None:
+    couplings = [Coupling.make("wheel.phi", "att.phi"), Coupling.make(target, source)]
+    if not refused:
+        check_units(couplings, UNITS_IN, UNITS_OUT)
+        return
+    with pytest.raises(CouplingError) as err:
+        check_units(couplings, UNITS_IN, UNITS_OUT)
+    assert err.value.index == 1
+    assert str(err.value) == ("coupling att.omega -> wheel.omega: units differ, the output is in 'rad/s' and the input "
+                              "takes 'deg/s': convert with a transform (transform = \"gain\", params = { k = ... }) or "
+                              "declare the ports in one unit")
+
+
+def test_a_transform_may_convert_units() -> None:
+    check_units([Coupling.make("wheel.omega", "att.omega", "gain", {"k": 57.29577951308232})], UNITS_IN, UNITS_OUT)
+
+
+def test_an_input_driven_twice_is_told_how_to_add_its_sources() -> None:
+    couplings = [Coupling.make("b.u", "a.y"), Coupling.make("b.u", "c.y")]
+    with pytest.raises(CouplingError) as err:
+        check_couplings(couplings, {"b": {"u": 1}}, {"a": {"y": 1}, "c": {"y": 1}})
+    assert str(err.value) == ("input b.u is driven twice: by a.y -> b.u and by c.y -> b.u; to add them, give one "
+                              "coupling every source in its from, with transform = \"linear\" (params = { gains = "
+                              "[...] }) or a function of your own")
+
+
+def test_cosim_run_refuses_a_unit_mismatch_before_the_first_interval(tmp_path: Path) -> None:
+    (tmp_path / "wheel.py").write_text(
+        "import numpy as np\nfrom cosim import Port, Subsim\n\n\n"
+        "class Wheel(Subsim):\n"
+        "    inputs = {'omega': Port(1, 'deg/s')}\n"
+        "    outputs = {'h': Port(1, 'N m s')}\n\n"
+        "    def initial_state(self, params):\n        return np.zeros(1)\n\n"
+        "    def advance(self, state, times, u):\n        return {'h': np.zeros((times.size, 1))}, state\n")
+    oscillator = (Path(__file__).parents[1] / "scenarios" / "oscillator.toml").read_text()
+    (tmp_path / "s.toml").write_text(oscillator + '\n[subsims.wheel]\nmodel = "wheel:Wheel"\n\n'
+                                     '[[couplings]]\nto = "wheel.omega"\nfrom = "mass1.v"\n')
+    done = subprocess.run([sys.executable, "-m", "cosim.cli", "run", "s.toml", "--inprocess", "--quiet"],
+                          capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    assert done.returncode == 2, done.stderr
+    assert "coupling mass1.v -> wheel.omega: units differ, the output is in 'm/s' and the input takes 'deg/s'" \
+        in done.stderr and len(done.stderr.strip().splitlines()) == 1, done.stderr
+    assert not [p for p in (tmp_path / "results").rglob("*")]  # nothing was written
