@@ -88,8 +88,9 @@ def _run_until_done(args: argparse.Namespace, state: dict) -> int:
                               resume=args.resume)
     s = report.summary
     hist = ", ".join(f"{k} stages: {v}" for k, v in sorted(s.stages.items()))
-    print(f"{scenario.name} ({report.method}): {s.intervals} intervals to t = {s.t_end:.6g} in {s.wall_time:.2f} s"
-          f"{f' ({hist})' if hist else ''}")
+    resumed = f" from its resume point at t = {s.t_start:.6g}" if args.resume else ""
+    print(f"{scenario.name} ({report.method}): {s.intervals} intervals{resumed} to t = {s.t_end:.6g} in "
+          f"{s.wall_time:.2f} s{f' ({hist})' if hist else ''}")
     if report.method != "unified" and s.intervals:  # what the run cost in requests (rejected tries included)
         span = s.t_end - s.t_start
         per_second = f" ({s.round_trips / span:.3g} round trips per simulated second)" if span > 0 else ""

@@ -116,6 +116,12 @@ def test_cosim_run_resume_after_sigint_over_zenoh(tmp_path: Path) -> None:
     done = subprocess.run([*cosim, "--output", str(part), "--resume"], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
     assert part.read_bytes() == whole.read_bytes()
+    import re
+
+    said = re.search(r"\((distributed|centralized)\): (\d+) intervals from its resume point at t = (\d+) to t = 20 in ",
+                     done.stdout)
+    assert said, done.stdout  # where it went on from, and the intervals it ran from there (20 per resume point)
+    assert 0 < int(said[3]) < 20 and int(said[2]) == round((20 - int(said[3])) / 0.05)
 
 
 def test_a_last_interval_cut_to_end_at_stop_is_no_resume_point(tmp_path: Path) -> None:
