@@ -7,10 +7,11 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from scipy.linalg import eigh
 
 from subsims.flexbody import modal
 from subsims.flexbody.kinematics import dcm_to_quat, euler123_to_dcm
-from subsims.flexbody.model import FlexModel, join_state, make_modal_model
+from subsims.flexbody.model import FlexModel, coefficient_matrix, join_state, make_modal_model
 from subsims.flexbody.vehicle import SAMPLE_VEHICLE
 
 MODES = ("free", "attitude", "base")
@@ -126,3 +127,21 @@ def build(params: Mapping[str, Any]) -> FlexSetup:
         dcm_to_quat(euler123_to_dcm(theta0)),
     )
     return FlexSetup(mode, UNIT_SYSTEMS[p["units"]], model, omega2_all, Y0, eta0, eta_dot0, h)
+
+
+RK4_ACCURATE = 0.3  # omega_max h at most this for accuracy (spec §4.1 R5; <= 2.8 for stability alone)
+
+
+def fastest_frequency(setup: FlexSetup) -> float:
+    """omega_max of spec §4.1 R5, rad/s: in mode "free" the highest free-free frequency of the retained model (the
+    modes' stiffness against the undeformed vehicle's whole mass matrix, rigid motion condensed out), in modes
+    "attitude" and "base" the highest retained constrained frequency; 0 without modes."""
+    model = setup.model
+    if model.t == 0:
+        return 0.0
+    if setup.mode != "free":
+        return float(np.sqrt(np.max(model.K_eta.diagonal())))
+    A = coefficient_matrix(model, np.zeros((model.n, 3)), mass_order=1)
+    rigid, flexible = slice(0, 6), slice(6, None)
+    condensed = A[flexible, flexible] - A[flexible, rigid] @ np.linalg.solve(A[rigid, rigid], A[rigid, flexible])
+    return float(np.sqrt(np.max(eigh(model.K_eta, condensed, eigvals_only=True))))

@@ -30,7 +30,7 @@ import numpy as np
 from cosim.subsim import InputFunction, ModelError, Param, Port, Subsim
 from subsims.adapters import Unset, unset_by_default
 from subsims.flexbody.appendage import appendage_accelerations, inertia_split
-from subsims.flexbody.config import FlexSetup, build
+from subsims.flexbody.config import RK4_ACCURATE, FlexSetup, build, fastest_frequency
 from subsims.flexbody.model import Loads, integrate, integrate_samples
 from subsims.flexbody.outputs import appendage_outputs, free_outputs
 from subsims.flexbody.vehicle import SAMPLE_VEHICLE
@@ -169,6 +169,12 @@ class FlexBody(Subsim):
         setup = build(Unset(params, unset_by_default(self.params)))
         if setup.mode != "free" and setup.model.t == 0:
             raise ValueError(f"parameter 'n_modes' must be >= 1 in mode {setup.mode!r}")
+        omega_max = fastest_frequency(setup)
+        if omega_max * setup.h > RK4_ACCURATE:  # RK4 is then off by far more than the modes matter (spec §4.1 R5)
+            kind = "free-free" if setup.mode == "free" else "constrained"
+            raise ValueError(f"parameter 'h' = {setup.h:g} s is too long for the fastest retained mode ({kind}, "
+                             f"{omega_max:.4g} rad/s): omega_max h = {omega_max * setup.h:.3g} > {RK4_ACCURATE} (RK4's "
+                             f"accuracy bound, spec R5); take h <= {RK4_ACCURATE / omega_max:.3g} s or fewer n_modes")
         self.setup = setup
         self.model = setup.model
         self.split = inertia_split(setup.model)

@@ -105,6 +105,21 @@ def test_bad_parameters(params):
         FlexBody().initial_state(params)
 
 
+def test_a_step_too_long_for_the_fastest_retained_mode_is_refused():
+    """Spec §4.1 R5: omega_max h <= 0.3. The sample vehicle's free-free frequencies are 12.8, 24.9, 123.4 and 590
+    rad/s with 2, 4, 8 and 12 modes: at 8 modes the default h = 0.01 s (1.23) ran, and drifted off (energy 3.8e-3
+    over 60 s, a wrong trajectory)."""
+    with pytest.raises(ValueError) as err:
+        FlexBody().initial_state({"n_modes": 8})
+    assert str(err.value) == ("parameter 'h' = 0.01 s is too long for the fastest retained mode (free-free, 123.4 "
+                              "rad/s): omega_max h = 1.23 > 0.3 (RK4's accuracy bound, spec R5); take h <= 0.00243 s "
+                              "or fewer n_modes")
+    FlexBody().initial_state({"n_modes": 8, "h": 0.0024})
+    FlexBody().initial_state({"n_modes": 4, "h": 0.012})  # 24.9 rad/s: 0.299
+    with pytest.raises(ValueError, match=r"\(constrained, 25.71 rad/s\): omega_max h = 0.308"):
+        FlexBody().initial_state({"mode": "attitude", "n_modes": 8, "h": 0.012})
+
+
 # ---- controller ------------------------------------------------------------------------------------------
 
 
