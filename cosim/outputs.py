@@ -123,8 +123,13 @@ class OutputLock:
             except FileNotFoundError:
                 same = False
             if same:
-                os.ftruncate(fd, 0)
-                os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+                try:
+                    os.ftruncate(fd, 0)
+                    os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+                except OSError as exc:  # a full disk: not even the pid fits
+                    held = cls(path, fd)
+                    held.release()
+                    raise OutputError(f"cannot write {path}: {write_failure(exc, lock)}") from None
                 return cls(path, fd)
             os.close(fd)  # we locked a file its holder had just removed: take the new one
         raise OutputError(f"cannot lock {lock}: it keeps being replaced; is another program using it?")
@@ -237,15 +242,25 @@ class AppendFile:
                 view = view[n:]
                 self.size += n
         except OSError as exc:
-            try:
-                os.ftruncate(self.fd, start)
-                self.size = start
-            except OSError:
-                pass
+            self.cut(start)
             where = ends_at()
             reason = "disk full" if exc.errno in (errno.ENOSPC, errno.EDQUOT) else describe_oserror(exc)
             raise OutputWriteError(f"{reason} writing {self.path} ({self.what}){': ' + where if where else ''}; "
                               "free space or choose another --output, then run again") from None
+        if os.fstat(self.fd).st_nlink == 0:  # written to a file no name reaches any more: lost at close
+            self.size = start
+            raise OutputWriteError(f"{self.path} ({self.what}) was removed during the run (by another program?): "
+                                   "what this run wrote there is lost; run again")
+
+    def cut(self, size: int) -> None:
+        """Cut the file back to its first ``size`` bytes (what a record written after them would undo), if it can."""
+        assert self.fd is not None, f"{self.path} is closed"
+        try:
+            os.ftruncate(self.fd, size)
+            os.lseek(self.fd, size, os.SEEK_SET)
+            self.size = size
+        except OSError:
+            pass
 
     def close(self, sync: bool = True) -> None:
         if self.fd is None:
@@ -271,13 +286,30 @@ def atomic_write(path: Path, write: Callable[[BinaryIO], None]) -> None:
             os.fsync(f.fileno())
         os.replace(tmp, path)
     except OSError as exc:
-        tmp.unlink(missing_ok=True)
-        reason = "disk full" if exc.errno in (errno.ENOSPC, errno.EDQUOT) else describe_oserror(exc)
-        raise OutputWriteError(f"{reason} writing {path}; free space or choose another place, then run again") \
-            from None
+        _remove_quietly(tmp)
+        raise OutputWriteError(f"{write_failure(exc, path)}, then run again") from None
     except BaseException:
-        tmp.unlink(missing_ok=True)
+        _remove_quietly(tmp)
         raise
+
+
+def _remove_quietly(path: Path) -> None:
+    """Remove ``path`` if it is there and can be removed (a read-only file system refuses even that: the write's own
+    error is the one to report)."""
+    try:
+        path.unlink(missing_ok=True)
+    except OSError:
+        pass
+
+
+def write_failure(exc: OSError, path: Path) -> str:
+    """Why writing ``path`` failed and what to do, for a line the user acts on: 'disk full writing x; free space
+    or choose another place', 'the directory of x is gone ...', or the system's reason."""
+    if exc.errno in (errno.ENOSPC, errno.EDQUOT):
+        return f"disk full writing {path}; free space or choose another place"
+    if exc.errno == errno.ENOENT and not path.parent.exists():
+        return f"cannot write {path}: its directory {path.parent} was removed during the run; choose another place"
+    return f"{describe_oserror(exc)} writing {path}; choose another place"
 
 
 # --- the NPZ's streamed samples ------------------------------------------------------------------

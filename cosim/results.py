@@ -229,22 +229,27 @@ class ResultWriter:
         data = rows.astype("<f8").tobytes() if self._npz else "".join(text).encode()
         with interrupt.deferred():  # a signal waits until the interval is written whole
             assert self._data is not None and self._diag is not None, "write after close"
+            t = interval.t
+            line = [self._count + 1, repr(float(t[0])), repr(float(t[-1])), interval.stages,
+                    f"{interval.largest_residual:.6e}", f"{interval.wall_time:.6f}", interval.halvings,
+                    interval.restarts, repr(float(t[-1] - t[0])), f"{interval.error:.3e}"]
+            size = self._data.size
             try:
                 self._data.append(data, self._ends_at)
-                if rows.shape[0]:
-                    self.t_last = float(rows[-1, 0])
-                self.rows_written += rows.shape[0]
-                self._count += 1
-                t = interval.t
-                line = [self._count, repr(float(t[0])), repr(float(t[-1])), interval.stages,
-                        f"{interval.largest_residual:.6e}", f"{interval.wall_time:.6f}", interval.halvings,
-                        interval.restarts, repr(float(t[-1] - t[0])), f"{interval.error:.3e}"]
-                self._diag.append((",".join(map(str, line)) + "\n").encode(), self._ends_at)
-                if self._staged:  # the first interval is in: the files are this run's now
-                    self._promote()
+                try:
+                    self._diag.append((",".join(map(str, line)) + "\n").encode(), self._ends_at)
+                except OutputWriteError:  # the interval goes in whole or not at all: the two files end together
+                    self._data.cut(size)
+                    raise
             except OutputWriteError:
                 self.failed = True
                 raise
+            if rows.shape[0]:
+                self.t_last = float(rows[-1, 0])
+            self.rows_written += rows.shape[0]
+            self._count += 1
+            if self._staged:  # the first interval is in: the files are this run's now
+                self._promote()
 
     def _ends_at(self) -> str:
         if self._staged:

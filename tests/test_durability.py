@@ -24,7 +24,9 @@ import pytest
 from terminal import as_from_a_terminal
 
 from cosim import __version__, interrupt
-from cosim.outputs import AppendFile, OutputWriteError, atomic_write, stream_path
+from cosim.coupler.couplings import SignalRef
+from cosim.coupler.relaxation import Interval
+from cosim.outputs import AppendFile, OutputError, OutputLock, OutputWriteError, atomic_write, diag_path, stream_path
 from cosim.results import ResultWriter, read_results, read_units
 from cosim.runner import run_scenario
 from cosim.scenario import load
@@ -421,6 +423,81 @@ def test_atomic_write_leaves_the_old_file_or_the_whole_new_one(tmp_path: Path) -
     assert target.read_bytes() == b"old" and [p.name for p in tmp_path.iterdir()] == ["r.npz"]
     atomic_write(target, lambda f: f.write(b"new"))
     assert target.read_bytes() == b"new" and [p.name for p in tmp_path.iterdir()] == ["r.npz"]
+
+
+def test_atomic_write_on_a_read_only_file_system_is_one_error_not_its_cleanups(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The clean-up of the temporary file raised EROFS too, and that traceback hid the write's own error (ops
+    probe: a read-only bind mount over the output directory mid-run printed 40 lines)."""
+    def read_only(*args, **kwargs):
+        raise OSError(errno.EROFS, "Read-only file system")
+
+    monkeypatch.setattr("cosim.outputs.os.replace", read_only)
+    monkeypatch.setattr(Path, "unlink", read_only)
+    with pytest.raises(OutputWriteError) as err:
+        atomic_write(tmp_path / "r.csv.resume.npz", lambda f: f.write(b"x"))
+    assert str(err.value) == (f"Read-only file system writing {tmp_path / 'r.csv.resume.npz'}; choose another place, "
+                              "then run again")
+
+
+def test_a_lock_a_full_disk_cannot_hold_the_pid_of_is_one_error_and_left_behind(tmp_path: Path,
+                                                                             monkeypatch: pytest.MonkeyPatch) -> None:
+    def full(*args, **kwargs):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr("cosim.outputs.os.pwrite", full)
+    with pytest.raises(OutputError) as err:
+        OutputLock.acquire(tmp_path / "z.csv")
+    assert str(err.value) == (f"cannot write {tmp_path / 'z.csv'}: disk full writing {tmp_path / 'z.csv.lock'}; free "
+                              "space or choose another place")
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".npz"])
+def test_a_results_file_removed_during_the_run_stops_it_in_one_line(tmp_path: Path, suffix: str) -> None:
+    """rm of the results (or of the NPZ's stream) mid-run: the run went on writing into the removed file and ended
+    with exit 0 naming a file that did not exist (an NPZ's: a FileNotFoundError traceback at its end)."""
+    out = tmp_path / f"r{suffix}"
+    seen = []
+
+    def remove_at_the_tenth(interval) -> None:
+        seen.append(interval)
+        if len(seen) == 10:
+            (stream_path(out) if suffix == ".npz" else out).unlink()
+
+    with pytest.raises(OutputWriteError) as err:
+        run_scenario(load(OSCILLATOR), stop=2.0, output=out, inprocess=True, progress=False,
+                     on_interval=remove_at_the_tenth)
+    written = stream_path(out) if suffix == ".npz" else out
+    what = "the NPZ's streamed samples" if suffix == ".npz" else "results"
+    assert str(err.value) == (f"{written} ({what}) was removed during the run (by another program?): what this run "
+                              "wrote there is lost; run again")
+    assert len(seen) == 10
+
+
+def test_a_full_disk_in_the_diagnostics_cuts_the_interval_from_the_results_too(tmp_path: Path) -> None:
+    """The two files end at the same interval (the results had one interval more than the diagnostics, 1 of 16 fill
+    points in the ops probe)."""
+    out = tmp_path / "r.csv"
+    writer = ResultWriter(out, [(SignalRef("a", "x"), 1)])
+
+    def interval(t0: float) -> Interval:
+        t = np.linspace(t0, t0 + 0.1, 3)
+        return Interval(t, {"a": {"x": t[:, None]}}, {}, 2, {})
+
+    writer.write(interval(0.0))
+    writer.write(interval(0.1))
+    before = (out.read_bytes(), diag_path(out).read_bytes())
+
+    def full(data: bytes, ends_at: Callable[[], str] = lambda: "") -> None:
+        raise OutputWriteError(f"disk full writing {diag_path(out)} (diagnostics): {ends_at()}")
+
+    writer._diag.append = full  # the results' append goes through, the diagnostics' fails
+    with pytest.raises(OutputWriteError, match=r"results end at t = 0\.2 s"):
+        writer.write(interval(0.2))
+    writer.close(failed_run=True)
+    assert (out.read_bytes(), diag_path(out).read_bytes()) == before
+    assert read_results(out)[1][-1, 0] == 0.2
 
 
 def test_units_from_port_declarations_are_stored_with_both_formats(tmp_path: Path) -> None:
