@@ -33,8 +33,17 @@ def _run(args: argparse.Namespace) -> int:
     state: dict = {"t": None, "output": args.output}
     try:
         with interrupt.handling():
-            return _run_until_done(args, state)
+            status = _run_until_done(args, state)
+            late = interrupt.late()
+        if late is not None:
+            say(f"cosim: {late} came after the run had finished; nothing was cut short")
+        return status
     except interrupt.Interrupted as exc:
+        stop, t = state.get("stop"), state["t"]
+        if t is not None and stop is not None and t >= stop - 1e-9 * max(1.0, abs(stop)):  # only its end was left
+            resume_path(Path(state["output"])).unlink(missing_ok=True)  # (its subsims' last commit): it is whole
+            say(f"cosim: {exc.name} came as the run finished; every interval to t = {t:.6g} s is in {state['output']}")
+            return 0
         if state["t"] is None:
             where = "before any new interval was committed" if args.resume else "before any interval was committed"
         else:
@@ -58,6 +67,7 @@ def _run_until_done(args: argparse.Namespace, state: dict) -> int:
     scenario = load(args.scenario)
     check_stop(args.stop, scenario.start)
     check_run_options(args)
+    state["stop"] = scenario.stop if args.stop is None else args.stop
     method = args.method or scenario.default_method
     output = state["output"] = Path(args.output) if args.output is not None else default_output(scenario, method)
 

@@ -38,9 +38,14 @@ class _State:
     depth = 0  # nesting of deferred()
     pending: int | None = None  # a signal that arrived inside deferred()
     raised = False  # the first signal has been raised: ignore the rest
+    finished = False  # the run is done (only its cleanup is left): a signal is noted, not raised
+    late: int | None = None  # the first signal that came after the run was done
 
 
 def _handler(signum: int, frame: FrameType | None) -> None:
+    if _State.finished:
+        _State.late = _State.late or signum
+        return
     if _State.raised or _State.pending is not None:
         return
     if _State.depth > 0:
@@ -60,6 +65,7 @@ def handling(signals: tuple[int, ...] = SIGNALS) -> Iterator[None]:
     # a signal ignored when we started stays ignored: `nohup cosim run ...` must survive the hangup
     old = {s: h for s in signals if (h := signal.getsignal(s)) is not signal.SIG_IGN}
     _State.active, _State.depth, _State.pending, _State.raised = True, 0, None, False
+    _State.finished, _State.late = False, None
     for s in old:
         signal.signal(s, _handler)
     try:
@@ -84,6 +90,19 @@ def deferred() -> Iterator[None]:
             signum, _State.pending = _State.pending, None
             _State.raised = True
             raise Interrupted(signum)
+
+
+def finished() -> None:
+    """The run is done: what is left (closing files, stopping subsims) finishes whatever comes. A signal held back
+    until now, or arriving from now on, is only noted (:func:`late`): stopping would cut short a finished run."""
+    _State.finished = True
+    if _State.pending is not None:
+        _State.late, _State.pending = _State.pending, None
+
+
+def late() -> str | None:
+    """The name of the first signal that came after :func:`finished`, if any."""
+    return None if _State.late is None else signal.Signals(_State.late).name
 
 
 def pending() -> int | None:

@@ -394,6 +394,7 @@ def run_scenario(
             writer.close(failed_run=True)
             bar.done()
             raise
+        interrupt.finished()  # a stop asked for now would only cut the cleanup of a finished run short
         writer.close()
         bar.done()
         if lock is None:

@@ -118,6 +118,7 @@ def _run_unified(scenario: Scenario, stop: float | None, output: Path, lock: Out
             summary.add(interval)
             if on_interval is not None:
                 on_interval(interval)
+        interrupt.finished()  # every interval is in: a signal now would only cut the files' closing short
     finally:
         writer.close()
     summary.wall_time = wall

@@ -26,7 +26,16 @@ from terminal import as_from_a_terminal
 from cosim import __version__, interrupt
 from cosim.coupler.couplings import SignalRef
 from cosim.coupler.relaxation import Interval
-from cosim.outputs import AppendFile, OutputError, OutputLock, OutputWriteError, atomic_write, diag_path, stream_path
+from cosim.outputs import (
+    AppendFile,
+    OutputError,
+    OutputLock,
+    OutputWriteError,
+    atomic_write,
+    diag_path,
+    resume_path,
+    stream_path,
+)
 from cosim.results import ResultWriter, read_results, read_units
 from cosim.runner import run_scenario
 from cosim.scenario import load
@@ -142,6 +151,53 @@ def test_an_interval_written_as_the_signal_came_counts_as_committed(tmp_path: Pa
                          on_interval=lambda iv: seen.append(float(iv.t[-1])))
     written = diag_rows(out.with_name(out.name + ".diag.csv"))
     assert len(written) == len(seen) == 3 and float(written[-1][2]) == seen[-1]
+
+
+def test_a_signal_during_the_cleanup_of_a_finished_run_cuts_nothing_short(tmp_path: Path, monkeypatch) -> None:
+    """A SIGTERM while the subsims of a finished run were being stopped: the run was reported as interrupted (exit 143)
+    and its resume point was already gone, so --resume said 'run it again from the start' (ops probe)."""
+    from cosim.runner import Session
+
+    close = Session.close
+
+    def close_under_a_signal(self) -> None:  # noqa: ANN001
+        os.kill(os.getpid(), signal.SIGTERM)
+        close(self)
+
+    monkeypatch.setattr(Session, "close", close_under_a_signal)
+    out = tmp_path / "r.csv"
+    try:
+        with interrupt.handling():
+            report = run_scenario(load(OSCILLATOR), stop=1.0, output=out, inprocess=True, progress=False)
+            late = interrupt.late()
+    except interrupt.Interrupted:  # (a KeyboardInterrupt: pytest would stop the session on it)
+        pytest.fail("the finished run was reported as interrupted")
+    assert late == "SIGTERM" and report.summary.t_end == 1.0
+    assert read_results(out)[1][-1, 0] == 1.0 and not resume_path(out).exists()
+
+
+def test_a_signal_with_the_last_interval_written_leaves_a_finished_run(tmp_path: Path, monkeypatch, capsys) -> None:
+    """The signal held back while the last interval was written is raised at its end, with only the subsims' last
+    commit left: the results are whole, so the run counts as finished (exit 0, no resume point to go on from)."""
+    from cosim.cli import main
+
+    append = ResultWriter._append
+
+    def append_then_signal(self, interval, *args, **kwargs):  # noqa: ANN001, ANN202
+        append(self, interval, *args, **kwargs)
+        if float(interval.t[-1]) >= 1.0:
+            raise interrupt.Interrupted(signal.SIGTERM)
+
+    monkeypatch.setattr(ResultWriter, "_append", append_then_signal)
+    out = tmp_path / "r.csv"
+    try:
+        status = main(["run", str(OSCILLATOR), "--stop", "1", "--inprocess", "--quiet", "--output", str(out)])
+    except KeyboardInterrupt:
+        pytest.fail("the finished run was reported as interrupted")
+    assert status == 0
+    said = capsys.readouterr().err.strip().splitlines()
+    assert said == [f"cosim: SIGTERM came as the run finished; every interval to t = 1 s is in {out}"], said
+    assert read_results(out)[1][-1, 0] == 1.0 and not resume_path(out).exists()
 
 
 def wait_for_intervals(run: Run, diag: Path, n: int, timeout: float = 120.0) -> None:
