@@ -21,11 +21,12 @@ from __future__ import annotations
 
 import errno
 import fcntl
+import hashlib
 import json
 import os
 from collections.abc import Callable
 from pathlib import Path
-from typing import BinaryIO
+from typing import Any, BinaryIO
 
 import numpy as np
 
@@ -219,10 +220,12 @@ class AppendFile:
     """A file written by whole records: each :meth:`append` is one ``write`` of complete rows, and a
     failed one (disk full, I/O error) is cut back, so the file always ends at the last whole record."""
 
-    def __init__(self, path: Path, what: str, keep: int | None = None) -> None:
-        """``keep``: go on with the file's first ``keep`` bytes (a resumed run) instead of an empty file."""
+    def __init__(self, path: Path, what: str, keep: int | None = None, digest: Any = None) -> None:
+        """``keep``: go on with the file's first ``keep`` bytes (a resumed run) instead of an empty file; ``digest``:
+        their SHA-256 (a ``hashlib`` object), else read from the file. :meth:`mark` tells what is written."""
         self.path, self.what = path, what
         try:
+            self._sha: Any = digest if digest is not None else (prefix_digest(path, keep) if keep else hashlib.sha256())
             self.fd: int | None = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_CLOEXEC | (0 if keep else os.O_TRUNC),
                                           0o644)
             if keep:
@@ -251,10 +254,17 @@ class AppendFile:
             self.size = start
             raise OutputWriteError(f"{self.path} ({self.what}) was removed during the run (by another program?): "
                                    "what this run wrote there is lost; run again")
+        if self._sha is not None:
+            self._sha.update(data)
+
+    def mark(self) -> tuple[int, str] | None:
+        """(bytes written, their SHA-256): what a resume checks the file still holds; None once it was cut back."""
+        return None if self._sha is None else (self.size, self._sha.hexdigest())
 
     def cut(self, size: int) -> None:
         """Cut the file back to its first ``size`` bytes (what a record written after them would undo), if it can."""
         assert self.fd is not None, f"{self.path} is closed"
+        self._sha = None  # (a hash does not go back)
         try:
             os.ftruncate(self.fd, size)
             os.lseek(self.fd, size, os.SEEK_SET)
@@ -273,6 +283,19 @@ class AppendFile:
         finally:
             os.close(self.fd)
             self.fd = None
+
+
+def prefix_digest(path: Path, size: int) -> Any:
+    """SHA-256 of the first ``size`` bytes of ``path`` (a ``hashlib`` object, to go on with)."""
+    sha = hashlib.sha256()
+    with open(path, "rb") as f:
+        while size > 0:
+            chunk = f.read(min(size, 1 << 20))
+            if not chunk:
+                break
+            sha.update(chunk)
+            size -= len(chunk)
+    return sha
 
 
 def atomic_write(path: Path, write: Callable[[BinaryIO], None]) -> None:

@@ -21,9 +21,10 @@ import io
 import json
 import os
 import warnings
+from collections import deque
 from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -39,6 +40,7 @@ from cosim.outputs import (
     diag_path,
     is_npz,
     meta_path,
+    prefix_digest,
     read_stream,
     reserve_output,
     run_files,
@@ -92,9 +94,10 @@ class ResultWriter:
 
     def __init__(self, path: Path, signals: Sequence[tuple[SignalRef, int]],
                  units: Mapping[str, str] | None = None, lock: OutputLock | None = None,
-                 resume_at: float | None = None) -> None:
+                 resume_at: float | None = None, written: Mapping[str, Any] | None = None) -> None:
         """``resume_at``: go on with the files of an interrupted run, cut back to their rows up to that time (a
-        resume point's), which they must reach."""
+        resume point's), which they must reach; ``written``: what the run had written up to then (:meth:`written`
+        at that time), which they must still hold, byte for byte."""
         self.path, self.signals = Path(path), list(signals)
         self.columns = column_names(self.signals)
         self.units = column_units(self.signals, units)
@@ -108,8 +111,9 @@ class ResultWriter:
         self._data: AppendFile | None = None
         self._diag: AppendFile | None = None
         self._staged: list[Path] = []  # the final names of the files written under staged names so far
+        self._marks: deque[tuple[float, dict[str, Any]]] = deque(maxlen=64)  # (t_last, written) of recent intervals
         if resume_at is not None:
-            self._resume(resume_at)
+            self._resume(resume_at, written)
             return
         try:
             if self._npz:
@@ -152,7 +156,15 @@ class ResultWriter:
                 path.unlink(missing_ok=True)
         self._staged.clear()
 
-    def _resume(self, t: float) -> None:
+    def written(self, t: float) -> dict[str, Any] | None:
+        """What the files held when the interval ending at ``t`` was in (bytes and SHA-256 of each), for a resume
+        point there; None if that is not known (long ago, or a file was cut back)."""
+        for at, marks in reversed(self._marks):
+            if at == t:
+                return marks
+        return None
+
+    def _resume(self, t: float, written: Mapping[str, Any] | None = None) -> None:
         data = stream_path(self.path) if self._npz else self.path
         rebuilt = False
         try:
@@ -177,8 +189,18 @@ class ResultWriter:
             kept = _rows_to(rows[:, 0], t, data)
             keep = int(row_ends[kept - 1])
             diag_rows = _diag_rows_to(diag_path(self.path), t)
-            self._data = AppendFile(data, "the NPZ's streamed samples" if self._npz else "results", keep=keep)
-            self._diag = AppendFile(diag_path(self.path), "diagnostics", keep=diag_rows[1])
+            digests = {"results": prefix_digest(data, keep), "diagnostics": prefix_digest(diag_path(self.path),
+                                                                                          diag_rows[1])}
+            if written is not None and not rebuilt:  # (a stream rebuilt from the NPZ is not the bytes streamed)
+                for name, path, size in (("results", data, keep), ("diagnostics", diag_path(self.path), diag_rows[1])):
+                    if [size, digests[name].hexdigest()] != list(written[name]):
+                        raise OutputError(f"{path} is not as the run left it up to its resume point at t = {t:g} "
+                                          "(rows removed, added or changed since): it cannot go on from there; run "
+                                          "it again from the start with --overwrite")
+            self._data = AppendFile(data, "the NPZ's streamed samples" if self._npz else "results", keep=keep,
+                                    digest=digests["results"])
+            self._diag = AppendFile(diag_path(self.path), "diagnostics", keep=diag_rows[1],
+                                    digest=digests["diagnostics"])
         except BaseException as exc:
             self._close_files()
             if rebuilt and self._data is None:  # refused: the NPZ stays as it was, alone
@@ -248,6 +270,9 @@ class ResultWriter:
                 self.t_last = float(rows[-1, 0])
             self.rows_written += rows.shape[0]
             self._count += 1
+            marks = {"results": self._data.mark(), "diagnostics": self._diag.mark()}
+            if self.t_last is not None and None not in marks.values():
+                self._marks.append((self.t_last, marks))
             if self._staged:  # the first interval is in: the files are this run's now
                 self._promote()
 

@@ -54,6 +54,7 @@ class Saved:
     t_start: float
     point: ResumePoint
     states: dict[str, SubsimState]
+    written: Mapping[str, Any] | None = None  # the results files' bytes and SHA-256 up to the point (ResultWriter)
 
 
 def save(path: Path, saved: Saved) -> None:
@@ -67,7 +68,8 @@ def save(path: Path, saved: Saved) -> None:
         arrays[f"magnitude/{key}"] = m
     meta = {"format": FORMAT, "fingerprint": saved.fingerprint, "t_start": saved.t_start, "t": saved.point.t,
             "length": saved.point.length,
-            "subsims": {name: {"time": st.time, "model": st.model} for name, st in saved.states.items()}}
+            "subsims": {name: {"time": st.time, "model": st.model} for name, st in saved.states.items()},
+            "written": saved.written}
     arrays["meta"] = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
 
     def write(f: io.BufferedIOBase) -> None:
@@ -96,4 +98,4 @@ def load(path: Path) -> Saved:
         raise OutputError(f"{path} is damaged or not a resume point ({type(exc).__name__}: {why}): run it again "
                           "from the start with --overwrite") from None
     point = ResumePoint(float(meta["t"]), meta["length"], previous, magnitudes)
-    return Saved(meta["fingerprint"], float(meta["t_start"]), point, states)
+    return Saved(meta["fingerprint"], float(meta["t_start"]), point, states, meta.get("written"))

@@ -56,6 +56,9 @@ class Unrecorded:
     def holds(self, interval: Interval) -> bool:
         return True
 
+    def written(self, t: float) -> None:
+        return None
+
     def close(self, failed_run: bool = False) -> None:
         pass
 
@@ -372,7 +375,7 @@ def run_scenario(
                                       Saved(key, scenario.start, point, states)))
         writer: ResultWriter | Unrecorded = Unrecorded() if lock is None else ResultWriter(
             output, output_signals(scenario, session.descriptions), output_units(session.descriptions), lock=lock,
-            resume_at=None if saved is None else saved.point.t)
+            resume_at=None if saved is None else saved.point.t, written=None if saved is None else saved.written)
         bar = Progress(scenario.start if saved is None else saved.point.t, stop, enabled=progress)
 
         def each(interval: Interval) -> Iterator[None]:  # in steps: the coordinator writes while it waits
@@ -383,7 +386,8 @@ def run_scenario(
                     on_interval(interval)
                 raise
             while checkpoints and writer.t_last is not None and checkpoints[0].point.t <= writer.t_last:  # written
-                save_resume(resume_path(output), checkpoints.pop(0))
+                point = checkpoints.pop(0)
+                save_resume(resume_path(output), replace(point, written=writer.written(point.point.t)))
             bar.update(interval)
             if on_interval is not None:
                 on_interval(interval)

@@ -172,3 +172,44 @@ def test_an_atomic_write_cut_short_leaves_nothing_for_long(tmp_path: Path) -> No
     other.write_bytes(b"half")
     run_scenario(every(OSCILLATOR, 10), stop=0.5, output=out, inprocess=True, progress=False)
     assert not stale.exists() and other.exists()
+
+
+def _delete_line(lines: list[bytes]) -> list[bytes]:
+    return lines[:10] + lines[11:]
+
+
+def _duplicate_line(lines: list[bytes]) -> list[bytes]:
+    return lines[:10] + [lines[10]] + lines[10:]
+
+
+def _change_a_value(lines: list[bytes], column: int = 1) -> list[bytes]:
+    fields = lines[10].split(b",")
+    fields[column] = repr(float(fields[column]) + 0.5).encode()
+    return lines[:10] + [b",".join(fields)] + lines[11:]
+
+
+@pytest.mark.parametrize(("which", "edit"), [
+    ("results", _delete_line), ("results", _duplicate_line), ("results", _change_a_value),
+    ("diagnostics", lambda lines: _change_a_value(lines, column=5)),  # a wall time: nothing else looks at it
+])
+def test_results_edited_before_the_resume_point_are_not_resumed_from(tmp_path: Path, which: str, edit) -> None:
+    """A row deleted, duplicated or changed before the resume point went on silently (one row fewer or more, or the
+    changed value, in a run that said it was whole; ops probe): the resume point holds the size and SHA-256 of what
+    the run had written up to it, and the files must still hold exactly that."""
+    sc = every(OSCILLATOR, 10)
+    part = tmp_path / "part.csv"
+    with pytest.raises(Stop):
+        run_scenario(sc, stop=3.0, output=part, inprocess=True, progress=False, on_interval=stop_after(47))
+    edited = part if which == "results" else part.with_name(part.name + ".diag.csv")
+    original = edited.read_bytes()
+    changed = b"".join(edit(original.splitlines(keepends=True)))  # line 10: before the resume point at t = 2
+    assert changed != original
+    edited.write_bytes(changed)
+    with pytest.raises(OutputError) as err:
+        run_scenario(sc, stop=3.0, output=part, inprocess=True, progress=False, resume=True)
+    assert str(err.value) == (f"{edited} is not as the run left it up to its resume point at t = 2 (rows removed, "
+                              "added or changed since): it cannot go on from there; run it again from the start with "
+                              "--overwrite")
+    assert edited.read_bytes() == changed  # refused before anything was cut or written
+    edited.write_bytes(original)
+    run_scenario(sc, stop=3.0, output=part, inprocess=True, progress=False, resume=True)  # as the run left them
