@@ -88,7 +88,7 @@ def test_cosim_run_with_a_certificate_listens_on_tls_by_default_and_asks_for_the
 ) -> None:
     """--tls-cert alone used to leave the default tcp/ endpoint (refused: must be tls/), and without --tls-ca the
     launched subsims timed out after 10 s; a missing file is named by its option."""
-    cosim = [sys.executable, "-m", "cosim.cli", "run", str(OSCILLATOR), "--stop", "0.1", "--quiet",
+    cosim = [sys.executable, "-m", "cosim.cli", "run", str(OSCILLATOR), "--stop", "0.1",  # (not --quiet: see below)
              "--tls-cert", str(certs["router_pem"]), "--tls-key", str(certs["router_key"])]
     ok = subprocess.run([*cosim, "--tls-ca", str(certs["ca_pem"]), "--output", str(tmp_path / "a.csv")],
                         capture_output=True, text=True, timeout=120)
