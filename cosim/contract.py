@@ -67,5 +67,15 @@ class SubsimDied(SubsimError):
     """The subsim process went away (liveliness lost or no responder)."""
 
 
+class SubsimLeft(SubsimDied):
+    """The subsim process left while this coordinator did not run (stopped, or starved of CPU) for longer than a
+    subsim waits for it. ``pause``: that pause's (start, end), monotonic seconds: every subsim it made leave counts
+    as one failure."""
+
+    def __init__(self, code: str, message: str, subsim: str, command: str, pause: tuple[float, float]) -> None:
+        super().__init__(code, message, subsim, command)
+        self.pause = pause
+
+
 class SubsimHung(SubsimError):
     """The subsim did not reply within the caller's deadline (stopped, stuck in its model, or cut off)."""

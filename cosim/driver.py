@@ -21,7 +21,7 @@ from typing import Any, NoReturn, TypeVar
 
 import numpy as np
 
-from cosim.contract import SubsimDied, SubsimError, SubsimHung
+from cosim.contract import SubsimDied, SubsimError, SubsimHung, SubsimLeft
 from cosim.coupler.couplings import Coupling, check_units
 from cosim.coupler.plan import Plan
 from cosim.coupler.relaxation import (
@@ -117,6 +117,7 @@ class Restart:
     reason: str
     replayed: int  # committed intervals replayed since the checkpoint
     restored: bool = True  # False: this replacement failed while being restored (and used up a restart)
+    charged: bool = True  # False: another subsim lost in the same pause of this coordinator used the restart
 
 
 def _recoverable(exc: BaseException) -> bool:
@@ -169,6 +170,7 @@ class Coordinator:
         self.recovery = recovery
         self.deadline = deadline or Deadline()
         self.restarts: list[Restart] = []
+        self._pauses: list[tuple[float, float]] = []  # this coordinator's pauses that made subsims leave, charged
         # what a replacement needs: each subsim's last checkpoint, the committed intervals since (their times and
         # the inputs each subsim converged with), and the inputs sent to each subsim in its latest run
         self._checkpoints: dict[str, SubsimState] = {}
@@ -387,8 +389,8 @@ class Coordinator:
         if not errors:
             return results
         fatal = [e for e in errors.values() if not _recoverable(e)]
-        left = 0 if self.recovery is None else self.recovery.restarts - len(self.restarts)
-        if fatal or len(errors) > left:
+        left = 0 if self.recovery is None else self.recovery.restarts - self._used()
+        if fatal or self._cost(errors.values()) > left:
             raise fatal[0] if fatal else self._out_of_restarts(next(iter(errors.values())))
         for name, exc in errors.items():
             self._replace(name, exc)
@@ -427,7 +429,7 @@ class Coordinator:
             except Exception as exc:
                 if not _recoverable(exc):
                     raise
-                if self.recovery is None or len(self.restarts) >= self.recovery.restarts:
+                if self.recovery is None or (self._cost([exc]) and self._used() >= self.recovery.restarts):
                     raise self._out_of_restarts(exc) from None
                 self._replace(name, exc)
 
@@ -438,19 +440,44 @@ class Coordinator:
             return exc
         notes = []
         if self.recovery is not None and self.recovery.restarts:
-            notes.append(f"no restarts left: {len(self.restarts)} of {self.recovery.restarts} used")
+            notes.append(f"no restarts left: {self._used()} of {self.recovery.restarts} used")
         if isinstance(exc, SubsimHung):
             notes.append("a model this slow at times needs a longer deadline: timeout (--timeout S, [run] timeout)")
         if not notes:
             return exc
         return type(exc)(exc.code, f"{exc.message} ({'; '.join(notes)})", exc.subsim, exc.command, exc.traceback)
 
+    def _used(self) -> int:
+        """Restarts used so far."""
+        return sum(r.charged for r in self.restarts)
+
+    def _charged(self, pause: tuple[float, float], pauses: list[tuple[float, float]]) -> bool:
+        return any(pause[0] < end and start < pause[1] for start, end in pauses)  # the same pause, seen twice
+
+    def _cost(self, errors: Iterable[Exception]) -> int:
+        """Restarts replacing the subsims of ``errors`` uses: one each, but one for all that left in one pause of
+        this coordinator (its own stop, not theirs: every subsim leaves a coordinator silent that long)."""
+        pauses, cost = list(self._pauses), 0
+        for exc in errors:
+            pause = getattr(exc, "pause", None)  # a SubsimLeft's, or a reply lost in the pause
+            if pause is not None:
+                if self._charged(pause, pauses):
+                    continue
+                pauses.append(pause)
+            cost += 1
+        return cost
+
     def _replace(self, name: str, why: Exception) -> None:
         """A new process for ``name`` at its last checkpoint, with every committed interval since replayed. A
         replacement that dies, hangs or cannot start while it is being restored uses up a restart too, and
-        the next one is tried while restarts are left."""
+        the next one is tried while restarts are left. Subsims that left in one pause of this coordinator use
+        one restart between them."""
         assert self.recovery is not None
-        reason = f"{'died' if isinstance(why, SubsimDied) else 'hung'} ({why})"
+        charged = self._cost([why]) > 0
+        if charged and getattr(why, "pause", None) is not None:
+            self._pauses.append(why.pause)  # type: ignore[attr-defined]
+        how = "left" if isinstance(why, SubsimLeft) else "died" if isinstance(why, SubsimDied) else "hung"
+        reason = f"{how} ({why})"
         self.handles[name].close()
         while True:
             try:
@@ -462,7 +489,7 @@ class Coordinator:
                 checkpoint = self._checkpoints.get(name)
                 self.restarts.append(Restart(name, checkpoint.time if checkpoint else math.nan, reason, 0,
                                              restored=False))
-                used, allowed = len(self.restarts), self.recovery.restarts
+                used, allowed = self._used(), self.recovery.restarts
                 self.recovery.log(f"cosim: {name} {reason}; its replacement ({used} of {allowed}) failed while "
                                   f"being restored: {exc}")
                 if used >= allowed:
@@ -471,12 +498,13 @@ class Coordinator:
                 reason = f"replacement failed ({exc})"
         self.handles[name] = handle
         self._uncommitted.discard(name)
-        self.restarts.append(Restart(name, at, reason, replayed))
+        self.restarts.append(Restart(name, at, reason, replayed, charged=charged))
         checkpoint = self._checkpoints.get(name)
         where = (f"restored to t = {at:g} (checkpoint at t = {checkpoint.time:g}, {replayed} intervals replayed)"
                  if checkpoint is not None else f"at its start, t = {at:g}")
-        self.recovery.log(f"cosim: {name} {reason}; replaced ({len(self.restarts)} of {self.recovery.restarts}), "
-                          f"{where}")
+        count = (f"{self._used()} of {self.recovery.restarts}" if charged else
+                 f"the restart of that pause, {self._used()} of {self.recovery.restarts} used")
+        self.recovery.log(f"cosim: {name} {reason}; replaced ({count}), {where}")
 
     def _restored(self, name: str) -> tuple[SubsimHandle, float, int]:
         """A new process for ``name`` in its committed state: its handle, that time, and the intervals replayed."""

@@ -356,6 +356,8 @@ class Bus:
                 pass
         handle = RemoteHandle(self.session, self.run, name, timeout=timeout, key=self.key(name))
         handle.exit_status = partial(exit_status, popen, elsewhere, DEATH_REAPED)
+        if lease:
+            handle.lease = lease
         proc = SubsimProcess(name, popen, handle, module, model, lease, elsewhere)
         self.processes.append(proc)
         try:

@@ -60,3 +60,39 @@ def test_a_paused_coordinator_does_not_call_its_subsims_hung(pause: float) -> No
     else:
         assert proc.returncode == 3, out
         assert "this coordinator did not run for" in out and "the query timed out meanwhile" in out, out
+
+
+@pytest.mark.slow
+def test_subsims_that_leave_a_paused_coordinator_use_one_restart_between_them(tmp_path) -> None:
+    """A coordinator stopped for longer than its subsims wait for it (the router's 10 s link lease and 2 s): every
+    subsim leaves, as it should. Each loss used a restart and was called a death: a 15 s pause stopped a three-subsim
+    run with two restarts, its subsims said 'died' (ops probe). Now all of them together use one restart, the lines
+    say they left in the coordinator's pause, and the run ends with the results of an undisturbed one."""
+    from pathlib import Path
+
+    scenario = Path(__file__).parents[1] / "scenarios" / "oscillator.toml"
+    run = [sys.executable, "-m", "cosim.cli", "run", str(scenario), "--stop", "150", "--restarts", "1"]
+    clean = subprocess.run([*run, "--output", str(tmp_path / "clean.csv"), "--inprocess"], capture_output=True,
+                           text=True, timeout=300)
+    assert clean.returncode == 0, clean.stderr
+    proc = subprocess.Popen([*run, "--output", str(tmp_path / "paused.csv")], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        diag = tmp_path / "paused.csv.diag.csv"
+        deadline = time.monotonic() + 60
+        while (not diag.exists() or diag.read_text().count("\n") < 200) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        os.kill(proc.pid, signal.SIGSTOP)
+        time.sleep(14.0)  # the subsims leave after the link's 10 s lease and 2 s of grace
+        os.kill(proc.pid, signal.SIGCONT)
+        _, err = proc.communicate(timeout=300)
+    finally:
+        if proc.poll() is None:
+            os.kill(proc.pid, signal.SIGCONT)
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 0, err
+    left = [line for line in err.splitlines() if " left (" in line and "replaced (" in line]
+    assert len(left) == 2 and "this coordinator did not run for" in left[0], err
+    assert "replaced (1 of 1)" in left[0] and "replaced (the restart of that pause, 1 of 1 used)" in left[1], err
+    assert (tmp_path / "paused.csv").read_bytes() == (tmp_path / "clean.csv").read_bytes()

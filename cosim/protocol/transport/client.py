@@ -11,13 +11,16 @@ from typing import Any
 
 import zenoh
 
-from cosim.contract import ProtocolError, SubsimDied, SubsimError, SubsimHung
+from cosim.contract import ProtocolError, SubsimDied, SubsimError, SubsimHung, SubsimLeft
 from cosim.handles import SubsimHandle
 from cosim.protocol.keys import alive_key, check_name, rpc_key
 from cosim.protocol.messages import ErrorInfo, decode_reply, encode_request, next_seq, sealer
 
 FAST_QUERY_TIMEOUT = 4.0  # seconds: zenoh's own timeout of requests whose deadline is at most half of it
 GONE_GRACE = 0.3  # seconds a request may still be answered after its subsim's liveliness token went
+DEFAULT_LEASE = 10.0  # s a subsim waits for a silent coordinator by default (cosim.process --lease)
+LEFT_AFTER = 0.8  # a death after a pause of this part of the subsim's lease or more is taken as caused by it
+PAUSE_REMEMBERED = 120.0  # s: a pause that ended longer ago explains no death
 SILENT_LIMIT = 15.0  # seconds a serving process (its token there, past a cut link's 10 s lease) may leave us unanswered
 # Every queryable on a subsim's key gets its requests (not only the best match): another login holder's queryable
 # declared there as complete would otherwise take them all and black-hole the subsim (its replies are forged anyway).
@@ -86,6 +89,15 @@ class _Watchdog:
         self._tick = time.monotonic()  # the last tick
         self._pauses: deque[tuple[float, float]] = deque(maxlen=16)  # (start, end) of the latest pauses
 
+    def long_pause(self, since: float, minimum: float) -> tuple[float, float] | None:
+        """The latest pause of at least ``minimum`` seconds that ended after ``since`` (the one going on, not yet
+        ticked over, included), as (start, end)."""
+        late = time.monotonic() - self._tick - self.TICK
+        if self._thread is not None and late >= minimum:
+            return self._tick, self._tick + late
+        return next(((start, end) for start, end in reversed(list(self._pauses))
+                     if end > since and end - start >= minimum), None)
+
     def paused_since(self, since: float) -> float:
         """Seconds this process was found not running after ``since``, a pause not yet ticked over included."""
         lost = sum(end - max(start, since) for start, end in list(self._pauses) if end > since)
@@ -145,6 +157,7 @@ class RemoteHandle(SubsimHandle):
         self.hung = False  # a request missed its deadline: the process is stuck or stopped (its stop need not ask)
         # how its process ended ("killed by SIGSEGV"), for the error that says it died; set by whoever started it
         self.exit_status: Callable[[], str | None] | None = None
+        self.lease = DEFAULT_LEASE  # s the subsim waits for a silent coordinator before it leaves (its --lease)
         self._server: Any = None  # the Zenoh id of the process that answers (its first valid reply's)
         self._in_flight: set[_Pending] = set()
         # A declared querier costs about 35 us less per request than session.get; its timeout is fixed at
@@ -313,8 +326,10 @@ class RemoteHandle(SubsimHandle):
         paused = _WATCHDOG.paused_since(pending.sent)
         if paused <= 0.0:
             return None
-        return SubsimHung("timeout", f"its reply was lost: this coordinator did not run for {paused:.1f} s during "
+        hung = SubsimHung("timeout", f"its reply was lost: this coordinator did not run for {paused:.1f} s during "
                           "the request (stopped, or starved of CPU) and the query timed out meanwhile", self.name, cmd)
+        hung.pause = _WATCHDOG.long_pause(pending.sent, _Watchdog.PAUSE)  # (its losses are one failure, as SubsimLeft)
+        return hung
 
     def _no_reply(self, cmd: str, pending: _Pending, deadline: float | None, forged: int) -> SubsimError:
         """Why the query ended without a genuine reply."""
@@ -336,7 +351,13 @@ class RemoteHandle(SubsimHandle):
 
     def _died_error(self, reason: str, cmd: str) -> SubsimDied:
         status = None if self.exit_status is None else self.exit_status()
-        return SubsimDied("no_responder", reason if status is None else f"{reason}: {status}", self.name, cmd)
+        reason = reason if status is None else f"{reason}: {status}"
+        pause = _WATCHDOG.long_pause(time.monotonic() - PAUSE_REMEMBERED, LEFT_AFTER * self.lease)
+        if pause is not None:  # it did what a subsim does when its coordinator is silent that long: leave
+            return SubsimLeft("no_responder", f"{reason}; it left while this coordinator did not run for "
+                              f"{pause[1] - pause[0]:.1f} s (stopped, or starved of CPU), as a subsim leaves a "
+                              f"coordinator silent for {self.lease:g} s", self.name, cmd, pause)
+        return SubsimDied("no_responder", reason, self.name, cmd)
 
     def close(self) -> None:
         for entity in (self._querier, self._liveliness):
