@@ -38,6 +38,13 @@ def _run(args: argparse.Namespace) -> int:
         if late is not None:
             say(f"cosim: {late} came after the run had finished; nothing was cut short")
         return status
+    except (SubsimError, NotConverged, TransformError, OutputWriteError) as exc:  # said by main(), with this note
+        if state["t"] is not None and state["output"] is not None:
+            point = _resume_time(Path(state["output"]))
+            if point is not None:
+                exc.add_note(f"every interval to t = {state['t']:.6g} s is in {state['output']}; once that is "
+                             f"fixed, the same command with --resume goes on from t = {point:.6g} s")
+        raise
     except interrupt.Interrupted as exc:
         stop, t = state.get("stop"), state["t"]
         if t is not None and stop is not None and t >= stop - 1e-9 * max(1.0, abs(stop)):  # only its end was left
@@ -52,6 +59,16 @@ def _run(args: argparse.Namespace) -> int:
             where += " (go on with the same command and --resume)"
         print(f"cosim: stopped by {exc.name} {where}", file=sys.stderr, flush=True)
         return exc.exit_status
+
+
+def _resume_time(output: Path) -> float | None:
+    """The time of the resume point a stopped run left beside ``output``, if it left one that reads."""
+    from cosim.resume import load as load_resume
+
+    try:
+        return load_resume(resume_path(output)).point.t
+    except OutputError:
+        return None
 
 
 def _run_until_done(args: argparse.Namespace, state: dict) -> int:
@@ -305,7 +322,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit
         return 141  # 128 + SIGPIPE, as a program killed by the signal
     except OutputWriteError as exc:  # the run stopped; its files end at the last whole interval
-        say(f"cosim: run stopped: {exc}")
+        _say_stopped(exc)
         return 1
     except (ScenarioError, OutputError, UsageError) as exc:
         say(f"cosim: {exc}")
@@ -315,16 +332,22 @@ def main(argv: Sequence[str] | None = None) -> int:
         say(f"cosim: {line}")
         return 2 if line.startswith("--listen") else 1
     except (NotConverged, TransformError) as exc:
-        say(f"cosim: run stopped: {exc}")
+        _say_stopped(exc)
         return 1
     except SubsimError as exc:
-        say(f"cosim: run stopped: {exc}")
+        _say_stopped(exc)
         if exc.traceback:  # a bug in a model: its own frames, file and line, as the subsim saw them
             say(f"the model's traceback (in subsim {exc.subsim!r}):\n{exc.traceback.rstrip()}")
         return 1
     except KeyboardInterrupt:
         say("cosim: interrupted; results up to the last committed interval are kept")
         return 130
+
+
+def _say_stopped(exc: Exception) -> None:
+    say(f"cosim: run stopped: {exc}")
+    for note in getattr(exc, "__notes__", ()):
+        say(f"cosim: {note}")
 
 
 if __name__ == "__main__":

@@ -120,10 +120,24 @@ def parse_args(model_cls: type[Subsim] | Subsim, argv: Sequence[str] | None,
     return args
 
 
+UNIX_SOCKET = "unixsock-stream/"
+
+
 def unreachable(endpoint: str, timeout: float) -> tuple[str | None, bool]:
     """(why nothing can be reached at a ``tcp/`` or ``tls/`` endpoint, found at once: a name that does not resolve,
     a refused or unroutable connection; whether a TCP connection opened). No reason when a connection opens,
     times out (a slow link: Zenoh goes on trying) or the endpoint is of another kind."""
+    if endpoint.startswith(UNIX_SOCKET):  # a private bus of this machine
+        path = endpoint[len(UNIX_SOCKET):].partition("#")[0]
+        try:
+            with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as s:
+                s.settimeout(timeout)
+                s.connect(path)
+            return None, True
+        except (FileNotFoundError, ConnectionRefusedError):
+            return f"nothing listens on {path} (its coordinator has ended?)", False
+        except OSError:
+            return None, True
     try:
         host, port = split_endpoint(endpoint.partition("#")[0])
     except ValueError:  # Zenoh says what is wrong with it
@@ -198,6 +212,9 @@ def main(model_cls: type[Subsim] | Subsim, argv: Sequence[str] | None = None, pr
             cause = ("something listens there, but its login/TLS refused ours, or it is not a cosim router: check "
                      f"${ZENOH_AUTH_ENV}/--auth-file, tls/ against tcp/ and --tls-ca" if connected else
                      "no answer from that address: a firewall, no route, or the wrong address?")
+            gone = unreachable(args.connect, 0.5)[0] if connected else None
+            if gone is not None:  # it was there a moment ago: its coordinator stopped (or was killed) meanwhile
+                cause = f"it went away while this subsim connected: {gone}"
             say(f"{args.name}: cannot reach the coordinator at {args.connect} within {args.connect_timeout:g} s "
                 f"({cause}) ({error_text(exc)})")
             return 2

@@ -51,10 +51,9 @@ def test_a_mistake_in_the_scenario_is_one_line_naming_it(tmp_path: Path, old: st
     assert "Traceback" not in done.stderr
 
 
-def test_a_transform_failing_in_a_run_stops_it_in_one_line_keeping_what_was_committed(tmp_path: Path) -> None:
-    """A user's transform that fails only on some values (not on the trial call before the run): the run
-    stops with one line naming the coupling and the error (it was a raw traceback), exit 1, and the
-    committed intervals stay in the results."""
+def picky_scenario(tmp_path: Path, extra: str = "") -> Path:
+    """The oscillator with a transform of the user's that fails once |x| passes 0.6 (not on the trial call before
+    the run), plus ``extra`` TOML."""
     (tmp_path / "picky.py").write_text(
         "import numpy as np\n\n\ndef picky(x, k, limit):\n"
         "    if np.abs(x).max() > limit:\n        raise ValueError(f'|x| = {np.abs(x).max():.2f} is past {limit}')\n"
@@ -64,7 +63,15 @@ def test_a_transform_failing_in_a_run_stops_it_in_one_line_keeping_what_was_comm
     assert old in text
     sc = tmp_path / "s.toml"
     sc.write_text(text.replace(old, 'transform = "picky:picky"\nparams = { k = 157.91367041742973, limit = 0.6 }'
-                                    '\n\n[[couplings]]', 1))
+                                    '\n\n[[couplings]]', 1) + extra)
+    return sc
+
+
+def test_a_transform_failing_in_a_run_stops_it_in_one_line_keeping_what_was_committed(tmp_path: Path) -> None:
+    """A user's transform that fails only on some values (not on the trial call before the run): the run
+    stops with one line naming the coupling and the error (it was a raw traceback), exit 1, and the
+    committed intervals stay in the results."""
+    sc = picky_scenario(tmp_path)
     out = tmp_path / "x.csv"
     for where in (["--inprocess"], []):
         done = subprocess.run([*COSIM, "run", str(sc), *where, "--quiet", "--output", str(out), "--overwrite"],
@@ -85,6 +92,20 @@ def test_a_transform_failing_in_a_run_stops_it_in_one_line_keeping_what_was_comm
                               text=True, timeout=120, cwd=tmp_path)
         assert done.returncode == 1 and "is past -1.0" in done.stderr and "exists" not in done.stderr, done.stderr
         assert sorted(p.name for p in tmp_path.iterdir() if p.name.startswith("x.")) == []
+
+
+def test_a_run_stopped_by_an_error_after_a_resume_point_says_how_to_go_on(tmp_path: Path) -> None:
+    """A run that stops on an error late (a transform here; a subsim out of restarts, a full disk alike) said only
+    the error: nothing said the results were kept or that --resume goes on once it is fixed (ops probe)."""
+    sc = picky_scenario(tmp_path, "\n[run]\ncheckpoint_every = 2\n")
+    out = tmp_path / "x.csv"
+    done = subprocess.run([*COSIM, "run", str(sc), "--inprocess", "--quiet", "--output", str(out)],
+                          capture_output=True, text=True, timeout=120)
+    lines = done.stderr.strip().splitlines()
+    assert done.returncode == 1 and len(lines) == 2 and lines[0].startswith("cosim: run stopped: coupling "), lines
+    end = out.read_text().splitlines()[-1].split(",")[0]
+    assert lines[1].startswith(f"cosim: every interval to t = {float(end):.6g} s is in {out}; once that is fixed, "
+                               "the same command with --resume goes on from t = "), lines[1]
 
 
 @pytest.mark.parametrize("suffix", [".csv", ".npz"])

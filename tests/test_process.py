@@ -113,6 +113,23 @@ def test_unreachable_endpoint_exits_with_a_clear_message_at_once(host: str, says
     assert f"lonely: cannot reach the coordinator at tcp/{host}:{port}: " in done.stderr and says in done.stderr
 
 
+def test_a_private_bus_that_is_gone_is_said_at_once(tmp_path: Path) -> None:
+    """A subsim started as its coordinator was killed (the Unix socket of its private bus gone, or left with no one
+    listening) tried for 10 s and then blamed its login or TLS (ops probe)."""
+    stale = tmp_path / "router.sock"
+    with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as s:
+        s.bind(str(stale))  # a socket file no one listens on any more
+    env = {**os.environ, "COSIM_SECRET": "00" * 32}
+    for path in (tmp_path / "gone.sock", stale):
+        endpoint = f"unixsock-stream/{path}"
+        started = time.monotonic()
+        done = subprocess.run([*subsim_command("subsims.integrator", endpoint, "run-x", "late"), "--connect-timeout",
+                               "20"], capture_output=True, text=True, timeout=30, env=env)
+        assert done.returncode == 2 and time.monotonic() - started < 10
+        assert done.stderr.strip() == (f"late: cannot reach the coordinator at {endpoint}: nothing listens on {path} "
+                                       "(its coordinator has ended?)"), done.stderr
+
+
 def test_a_login_made_for_another_run_or_name_is_refused_at_start() -> None:
     """--run or --name mistyped: the login still connects, then the router refuses its keys in silence and the
     process waited forever; it now says so and exits."""
