@@ -11,6 +11,7 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 
 import pytest
 
@@ -36,6 +37,22 @@ with Bus.open() as bus:
 """
 
 
+def paused(proc: subprocess.Popen, when: Callable[[], None], seconds: float) -> tuple[str, str]:
+    """Stop the coordinator ``proc`` for ``seconds`` once ``when()`` returns, and its output once it has ended; it is
+    continued and killed if the test fails meanwhile."""
+    try:
+        when()
+        os.kill(proc.pid, signal.SIGSTOP)
+        time.sleep(seconds)
+        os.kill(proc.pid, signal.SIGCONT)
+        return proc.communicate(timeout=300)
+    finally:
+        if proc.poll() is None:
+            os.kill(proc.pid, signal.SIGCONT)
+            proc.kill()
+            proc.wait()
+
+
 @pytest.mark.parametrize("pause", [2.5, 5.0])
 def test_a_paused_coordinator_does_not_call_its_subsims_hung(pause: float) -> None:
     """A pause longer than the deadline: the deadline moves on by it (the subsim was called hung, and a healthy
@@ -43,18 +60,12 @@ def test_a_paused_coordinator_does_not_call_its_subsims_hung(pause: float) -> No
     and the error says the pause was the coordinator's own (it read 'no reply within 60 s', and stopped the run
     instead of replacing the subsim)."""
     proc = subprocess.Popen([sys.executable, "-c", COORDINATOR], stdout=subprocess.PIPE, text=True)
-    try:
+
+    def ready() -> None:
         assert proc.stdout.readline().strip() == "ready"
         time.sleep(0.3)
-        os.kill(proc.pid, signal.SIGSTOP)
-        time.sleep(pause)
-        os.kill(proc.pid, signal.SIGCONT)
-        out, _ = proc.communicate(timeout=60)
-    finally:
-        if proc.poll() is None:
-            os.kill(proc.pid, signal.SIGCONT)
-            proc.kill()
-            proc.wait()
+
+    out, _ = paused(proc, ready, pause)
     if pause < 4.0:
         assert proc.returncode == 0 and out.strip() == "done", out
     else:
@@ -77,20 +88,14 @@ def test_subsims_that_leave_a_paused_coordinator_use_one_restart_between_them(tm
     assert clean.returncode == 0, clean.stderr
     proc = subprocess.Popen([*run, "--output", str(tmp_path / "paused.csv")], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
-    try:
-        diag = tmp_path / "paused.csv.diag.csv"
+    diag = tmp_path / "paused.csv.diag.csv"
+
+    def mid_run() -> None:
         deadline = time.monotonic() + 60
         while (not diag.exists() or diag.read_text().count("\n") < 200) and time.monotonic() < deadline:
             time.sleep(0.05)
-        os.kill(proc.pid, signal.SIGSTOP)
-        time.sleep(14.0)  # the subsims leave after the link's 10 s lease and 2 s of grace
-        os.kill(proc.pid, signal.SIGCONT)
-        _, err = proc.communicate(timeout=300)
-    finally:
-        if proc.poll() is None:
-            os.kill(proc.pid, signal.SIGCONT)
-            proc.kill()
-            proc.wait()
+
+    _, err = paused(proc, mid_run, 14.0)  # the subsims leave after the link's 10 s lease and 2 s of grace
     assert proc.returncode == 0, err
     left = [line for line in err.splitlines() if " left (" in line and "replaced (" in line]
     assert len(left) == 2 and "this coordinator did not run for" in left[0], err
