@@ -441,7 +441,7 @@ class Coordinator:
         notes = []
         if self.recovery is not None and self.recovery.restarts:
             notes.append(f"no restarts left: {self._used()} of {self.recovery.restarts} used")
-        if isinstance(exc, SubsimHung):
+        if isinstance(exc, SubsimHung) and getattr(exc, "pause", None) is None:  # (not a reply lost in our pause)
             notes.append("a model this slow at times needs a longer deadline: timeout (--timeout S, [run] timeout)")
         if not notes:
             return exc

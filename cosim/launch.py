@@ -324,7 +324,7 @@ class Bus:
         self._spawned_as[name] = (module, model, lease, elsewhere)  # for respawn, even if this start fails
         there = {} if elsewhere is None else {"endpoint": elsewhere.connect, "python": elsewhere.python}
         argv = [*self.command(module, name, model, lease=lease, **there), "--quiet-stop",
-                *([] if self.announce else ["--quiet-start"])]
+                *([] if self.announce or elsewhere else ["--quiet-start"])]  # (a cosim over there may predate it)
         if elsewhere is None:
             env = {**os.environ, **secrets}
             env.setdefault("PYTHONUNBUFFERED", "1")

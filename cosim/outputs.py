@@ -66,6 +66,12 @@ def staged(path: Path) -> Path:
     return path.with_name(f".{path.name}{STAGED}{os.getpid()}")
 
 
+def symlink_target(path: Path) -> Path:
+    """The file ``path`` names: itself, or the target of a symbolic link (a rename onto the link would replace the
+    link, where writing through it writes its target)."""
+    return path.resolve() if path.is_symlink() else path
+
+
 def unstaged(path: Path) -> Path:
     """The real name of a :func:`staged` one (any other name is its own)."""
     name = path.name
@@ -300,7 +306,9 @@ def prefix_digest(path: Path, size: int) -> Any:
 
 def atomic_write(path: Path, write: Callable[[BinaryIO], None]) -> None:
     """Write ``path`` under a temporary name in its directory, fsync, then rename: readers see the old
-    file or the whole new one. Raises OutputError (the temporary file is removed)."""
+    file or the whole new one (a symbolic link's target, the link kept). Raises OutputError (the temporary file is
+    removed)."""
+    path = symlink_target(path)
     tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
     try:
         with open(tmp, "wb") as f:

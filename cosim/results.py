@@ -48,7 +48,9 @@ from cosim.outputs import (
     stream_head,
     stream_header,
     stream_path,
+    symlink_target,
     unstaged,
+    write_failure,
     write_npz,
 )
 
@@ -110,7 +112,7 @@ class ResultWriter:
         self._count = 0
         self._data: AppendFile | None = None
         self._diag: AppendFile | None = None
-        self._staged: list[Path] = []  # the final names of the files written under staged names so far
+        self._staged: list[tuple[Path, Path]] = []  # (name, file it names) of the files written under staged names
         self._marks: deque[tuple[float, dict[str, Any]]] = deque(maxlen=64)  # (t_last, written) of recent intervals
         if resume_at is not None:
             self._resume(resume_at, written)
@@ -135,25 +137,33 @@ class ResultWriter:
             raise
 
     def _stage(self, path: Path) -> Path:
-        self._staged.append(path)
-        return staged(path)
+        """Where to write ``path`` until the first interval is in: beside the file it names (a symbolic link's
+        target, which the run writes as it always did)."""
+        target = symlink_target(path)
+        self._staged.append((path, target))
+        return staged(target)
 
     def _drop_staged(self) -> None:
-        for path in self._staged:
-            staged(path).unlink(missing_ok=True)
+        for _, target in self._staged:
+            staged(target).unlink(missing_ok=True)
         self._staged.clear()
 
     def _promote(self) -> None:
         """The staged files take their real names; what a previous run left under them and this run does not
         write again (its resume point, an NPZ this run builds at its end) goes."""
-        for path in self._staged:
-            os.replace(staged(path), path)
+        try:
+            for _, target in self._staged:
+                os.replace(staged(target), target)
+        except OSError as exc:  # the directory moved or went during the first interval
+            self.failed = True
+            raise OutputWriteError(f"{write_failure(exc, target)}, then run again") from None
         for f in (self._data, self._diag):
             if f is not None:
                 f.path = unstaged(f.path)
+        names = [name for name, _ in self._staged]
         for path in run_files(self.path):
-            if path not in self._staged:
-                path.unlink(missing_ok=True)
+            if path not in names:
+                symlink_target(path).unlink(missing_ok=True)  # (a link stays: it names what this run writes)
         self._staged.clear()
 
     def written(self, t: float) -> dict[str, Any] | None:
@@ -274,7 +284,7 @@ class ResultWriter:
             if self.t_last is not None and None not in marks.values():
                 self._marks.append((self.t_last, marks))
             if self._staged:  # the first interval is in: the files are this run's now
-                self._promote()
+                self._promote()  # (an OutputWriteError if they cannot be: not in the except above, nothing to cut)
 
     def _ends_at(self) -> str:
         if self._staged:
@@ -292,8 +302,8 @@ class ResultWriter:
         with interrupt.deferred():
             try:
                 self._close_files()
-                if failed_run and self._count == 0 and not self._resumed:
-                    self._drop_staged()
+                if (failed_run and self._count == 0 and not self._resumed) or (self._staged and self.failed):
+                    self._drop_staged()  # (nothing of this run is in place: what was there stays)
                     return
                 if self._staged:  # a run that ended without an interval (nothing to do): its files all the same
                     self._promote()

@@ -50,16 +50,31 @@ def _model_exception(where: str, exc: BaseException) -> CosimError:
 ATTRIBUTES_WATCHED = 3  # run_intervals after a configure whose model attributes are compared before and after
 
 
+VALUES = (bool, int, float, complex, str, bytes, tuple, frozenset, type(None))  # compared by value
+
+
 def _attribute_marks(model: object) -> dict[str, Any]:
-    """What tells an attribute changed: the object itself, an array's bytes (cheap, and shallow: a list appended to
-    in place goes unseen; ``cosim.check_pure`` compares deep copies)."""
-    return {k: v.tobytes() if isinstance(v, np.ndarray) else v for k, v in vars(model).items()}
+    """What tells an attribute changed: a value's value, an array's bytes, any other object itself (cheap, and
+    shallow: a list appended to in place goes unseen; ``cosim.check_pure`` compares deep copies)."""
+    return {k: (np.ndarray, v.tobytes()) if isinstance(v, np.ndarray) else v for k, v in vars(model).items()}
+
+
+def _same(a: Any, b: Any) -> bool:
+    if a is b:
+        return True
+    if isinstance(a, tuple) and len(a) == 2 and a[0] is np.ndarray:  # an array's mark
+        return isinstance(b, tuple) and len(b) == 2 and b[0] is np.ndarray and a[1] == b[1]
+    if type(a) is not type(b) or not isinstance(a, VALUES):
+        return False
+    try:
+        return bool(a == b)
+    except Exception:  # a tuple holding arrays
+        return False
 
 
 def _changed_attributes(before: Mapping[str, Any], after: Mapping[str, Any]) -> list[str]:
-    return sorted(k for k in set(before) | set(after)
-                  if k not in before or k not in after or not (before[k] is after[k] or (
-                      isinstance(before[k], bytes) and before[k] == after[k])))
+    return sorted(k for k in set(before) | set(after) if k not in before or k not in after or not _same(before[k],
+                                                                                                       after[k]))
 
 
 def _model_line(exc: BaseException) -> str:
@@ -243,7 +258,8 @@ class Runtime:
                 raise CosimError("model_error", f"advance() changed the model's attribute(s) {changed} (over t in "
                                  f"[{times[0]:g}, {times[-1]:g}]): what evolves belongs in the state vector, which "
                                  "a rollback or a repeated stage restores; advance() must depend on its arguments "
-                                 "only (cosim.check_pure tests that)")
+                                 "only (what it computes once, initial_state() may keep on self; cosim.check_pure "
+                                 "tests a model for this)")
         if type(result) is not tuple or len(result) != 2:
             got = f"a tuple of {len(result)}" if isinstance(result, tuple) else type(result).__name__
             raise CosimError("model_error", f"advance() must return (outputs, end_state), got {got}")

@@ -558,6 +558,36 @@ def test_a_full_disk_in_the_diagnostics_cuts_the_interval_from_the_results_too(t
     assert read_results(out)[1][-1, 0] == 0.2
 
 
+@pytest.mark.parametrize("suffix", [".csv", ".npz"])
+def test_overwrite_through_a_symbolic_link_writes_its_target_and_keeps_the_link(tmp_path: Path, suffix: str) -> None:
+    """The staged files replaced the link itself, leaving its target with the old results (red team)."""
+    (tmp_path / "real").mkdir()
+    target, link = tmp_path / "real" / f"t{suffix}", tmp_path / f"link{suffix}"
+    target.write_bytes(b"an old run's results")
+    link.symlink_to(target)
+    run_scenario(load(OSCILLATOR), stop=0.5, output=link, inprocess=True, progress=False)
+    assert link.is_symlink() and link.resolve() == target
+    assert read_results(target)[1][-1, 0] == 0.5
+    assert sorted(p.name for p in (tmp_path / "real").iterdir()) == [target.name]  # no staged file left there
+
+
+def test_results_that_cannot_take_their_names_are_one_error_and_leave_no_staged_file(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The output directory moved during the first interval: the rename into place raised a FileNotFoundError
+    traceback, twice (the close tried again; red team)."""
+    writer = ResultWriter(tmp_path / "r.csv", [(SignalRef("a", "x"), 1)])
+
+    def moved(src, dst) -> None:  # noqa: ANN001
+        raise FileNotFoundError(errno.ENOENT, "No such file or directory")
+
+    monkeypatch.setattr("cosim.results.os.replace", moved)
+    t = np.linspace(0.0, 0.1, 3)
+    with pytest.raises(OutputWriteError, match=r"^No such file or directory writing .*r\.csv.*; choose another place"):
+        writer.write(Interval(t, {"a": {"x": t[:, None]}}, {}, 2, {}))
+    writer.close(failed_run=True)
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_units_from_port_declarations_are_stored_with_both_formats(tmp_path: Path) -> None:
     for suffix in (".csv", ".npz"):
         out = tmp_path / f"u{suffix}"

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cosim import Port, Subsim
+from cosim import Port, Subsim, check_pure
 from cosim.contract import SubsimError
 from cosim.handles import InProcessHandle
 from cosim.runtime import Runtime
@@ -210,8 +210,23 @@ def test_a_model_that_keeps_run_state_in_its_attributes_is_refused_by_name(model
     assert h.status()["time"] == 0.0  # nothing committed
 
 
-def test_a_model_that_only_reads_its_attributes_runs() -> None:
-    h = InProcessHandle(_Cached(), "m")
+class _Rebinding(_Cached):
+    """Binds its attributes again to equal values (a fresh float, a fresh tuple): pure, as check_pure agrees (the
+    runtime refused it, comparing by identity; red team)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.k, self.shape = 2.0, (2,)
+
+    def advance(self, state, times, u):
+        self.k, self.shape = float(self.k) * 1.0, tuple([2])
+        return super().advance(state, times, u)
+
+
+@pytest.mark.parametrize("model", [_Cached, _Rebinding])
+def test_a_model_that_only_reads_its_attributes_runs(model: type[Subsim]) -> None:
+    check_pure(model(), {}, np.linspace(0.0, 0.4, 3), {"u": np.zeros((3, 1))})
+    h = InProcessHandle(model(), "m")
     h.configure({})
     for i in range(5):
         out = h.run_interval(np.linspace(0.4 * i, 0.4 * (i + 1), 3), {"u": np.zeros((3, 1))}, commit=i > 0)

@@ -288,3 +288,30 @@ def test_a_tls_file_that_is_not_there_is_named_at_start(tmp_path: Path) -> None:
     done = subprocess.run(cmd, capture_output=True, text=True, timeout=30, cwd=tmp_path,
                           env={**os.environ, "COSIM_SECRET": "00" * 32})
     assert done.returncode == 2 and f"--tls-ca certs/ca.pem: no such file (in {tmp_path})" in done.stderr
+
+
+def test_a_death_is_put_down_to_a_pause_of_the_coordinator_only_when_that_explains_it(
+        cosim_bus: Bus, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A subsim that exits by itself after this coordinator was stopped longer than its lease left because of it
+    (replaced with the others that left, for one restart). Not one started after the pause began, not one killed by
+    a signal, not after the pause is long past: for two minutes after a pause every death was 'left' and free, and
+    --restarts no longer bounded anything (red team)."""
+    from collections import deque
+
+    from cosim.contract import SubsimLeft
+    from cosim.protocol.transport import client
+
+    handle = cosim_bus.spawn("subsims.integrator", "paused").handle
+    now = time.monotonic()
+
+    def kind(born: float, status: str, pause: tuple[float, float] = (now - 14.0, now - 1.0)) -> type:
+        monkeypatch.setattr(client._WATCHDOG, "_pauses", deque([pause]))
+        handle._born, handle.exit_status = born, lambda: status
+        return type(handle._died_error("the process died during the request", "run_interval"))
+
+    exited = "its process exited with code 0"
+    assert kind(now - 20.0, exited) is SubsimLeft
+    assert kind(now - 20.0, "its process was killed by SIGKILL") is SubsimDied
+    assert kind(now - 5.0, exited) is SubsimDied  # its process was started after the pause began
+    assert kind(now - 100.0, exited, (now - 60.0, now - 45.0)) is SubsimDied  # a pause that ended 45 s ago
+    assert kind(now - 100.0, exited, (now - 6.0, now - 1.0)) is SubsimDied  # shorter than its lease

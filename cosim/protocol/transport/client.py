@@ -20,7 +20,7 @@ FAST_QUERY_TIMEOUT = 4.0  # seconds: zenoh's own timeout of requests whose deadl
 GONE_GRACE = 0.3  # seconds a request may still be answered after its subsim's liveliness token went
 DEFAULT_LEASE = 10.0  # s a subsim waits for a silent coordinator by default (cosim.process --lease)
 LEFT_AFTER = 0.8  # a death after a pause of this part of the subsim's lease or more is taken as caused by it
-PAUSE_REMEMBERED = 120.0  # s: a pause that ended longer ago explains no death
+PAUSE_REMEMBERED = 30.0  # s: a pause that ended longer before a death was found explains none
 SILENT_LIMIT = 15.0  # seconds a serving process (its token there, past a cut link's 10 s lease) may leave us unanswered
 # Every queryable on a subsim's key gets its requests (not only the best match): another login holder's queryable
 # declared there as complete would otherwise take them all and black-hole the subsim (its replies are forged anyway).
@@ -158,6 +158,7 @@ class RemoteHandle(SubsimHandle):
         # how its process ended ("killed by SIGSEGV"), for the error that says it died; set by whoever started it
         self.exit_status: Callable[[], str | None] | None = None
         self.lease = DEFAULT_LEASE  # s the subsim waits for a silent coordinator before it leaves (its --lease)
+        self._born = time.monotonic()  # a pause before its process was asked for made no process of it leave
         self._server: Any = None  # the Zenoh id of the process that answers (its first valid reply's)
         self._in_flight: set[_Pending] = set()
         # A declared querier costs about 35 us less per request than session.get; its timeout is fixed at
@@ -353,7 +354,8 @@ class RemoteHandle(SubsimHandle):
         status = None if self.exit_status is None else self.exit_status()
         reason = reason if status is None else f"{reason}: {status}"
         pause = _WATCHDOG.long_pause(time.monotonic() - PAUSE_REMEMBERED, LEFT_AFTER * self.lease)
-        if pause is not None:  # it did what a subsim does when its coordinator is silent that long: leave
+        if pause is not None and pause[0] > self._born and "killed by" not in (status or ""):
+            # it did what a subsim does when its coordinator is silent that long: leave (by itself, not by a signal)
             return SubsimLeft("no_responder", f"{reason}; it left while this coordinator did not run for "
                               f"{pause[1] - pause[0]:.1f} s (stopped, or starved of CPU), as a subsim leaves a "
                               f"coordinator silent for {self.lease:g} s", self.name, cmd, pause)
