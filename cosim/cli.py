@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import os
 import shlex
+import signal
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -14,7 +15,7 @@ from cosim.console import say
 from cosim.contract import SubsimError
 from cosim.coupler.couplings import TransformError
 from cosim.coupler.relaxation import METHODS, Interval, NotConverged, Settings
-from cosim.outputs import OutputError, OutputWriteError, resume_path
+from cosim.outputs import OutputError, OutputWriteError, diag_path, resume_path
 from cosim.preflight import UsageError, check_listen, check_run_options, check_stop, zenoh_error_line
 from cosim.protocol.keys import check_name
 from cosim.protocol.security import Security
@@ -42,14 +43,16 @@ def _run(args: argparse.Namespace) -> int:
         if state["t"] is not None and state["output"] is not None:
             point = _resume_time(Path(state["output"]))
             if point is not None:
+                how = "with --resume instead of --overwrite" if args.overwrite else "with --resume"
                 exc.add_note(f"every interval to t = {state['t']:.6g} s is in {state['output']}; once that is "
-                             f"fixed, the same command with --resume goes on from t = {point:.6g} s")
+                             f"fixed, the same command {how} goes on from t = {point:.6g} s")
         raise
     except interrupt.Interrupted as exc:
         stop, t = state.get("stop"), state["t"]
         if t is not None and stop is not None and t >= stop - 1e-9 * max(1.0, abs(stop)):  # only its end was left
             resume_path(Path(state["output"])).unlink(missing_ok=True)  # (its subsims' last commit): it is whole
             say(f"cosim: {exc.name} came as the run finished; every interval to t = {t:.6g} s is in {state['output']}")
+            print(f"results: {state['output']}\ndiagnostics: {diag_path(Path(state['output']))}")  # as a run's end
             return 0
         if state["t"] is None:
             where = "before any new interval was committed" if args.resume else "before any interval was committed"
@@ -350,5 +353,14 @@ def _say_stopped(exc: Exception) -> None:
         say(f"cosim: {note}")
 
 
+def entry() -> int:
+    """The ``cosim`` command: :func:`main`, then nothing a signal could change about the exit status (a SIGTERM
+    in the last milliseconds of a finished run killed it, rc -15, its files whole)."""
+    status = main()
+    for s in interrupt.SIGNALS:
+        signal.signal(s, signal.SIG_IGN)
+    return status
+
+
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(entry())

@@ -19,27 +19,41 @@ def say(line: str) -> None:
         sys.stderr = open(os.devnull, "w")  # for the rest of the process
 
 
-class PrefixedLines(io.TextIOBase):
-    """A text stream that says each whole line written to it on stderr after ``prefix`` (a subsim's name): what a
-    model prints, told apart from the coordinator's output and from other subsims'."""
+class _PrefixedRaw(io.RawIOBase):
+    """Bytes written go to file descriptor ``fd`` with ``prefix`` at the start of every line; nothing is held back,
+    and once the reader is gone nothing more is written (as :func:`say`)."""
 
-    def __init__(self, prefix: str) -> None:
-        self.prefix, self._partial = prefix, ""
+    def __init__(self, fd: int, prefix: bytes) -> None:
+        self._fd, self._prefix, self._at_start, self._gone = fd, prefix, True, False
 
     def writable(self) -> bool:
         return True
 
-    def write(self, text: str) -> int:
-        *lines, self._partial = (self._partial + text).split("\n")
-        for line in lines:
-            say(self.prefix + line)
-        return len(text)
+    def fileno(self) -> int:
+        return self._fd
 
-    def flush(self) -> None:
-        pass
+    def write(self, b: bytes | bytearray | memoryview) -> int:  # type: ignore[override]
+        data = bytes(b)
+        out = bytearray()
+        *whole, rest = data.split(b"\n")
+        for line in whole:
+            out += (self._prefix if self._at_start else b"") + line + b"\n"
+            self._at_start = True
+        if rest:
+            out += (self._prefix if self._at_start else b"") + rest
+            self._at_start = False
+        view = memoryview(out)
+        while view and not self._gone:
+            try:
+                view = view[os.write(self._fd, view):]
+            except OSError:
+                self._gone = True
+        return len(data)
 
-    def close(self) -> None:
-        if self._partial:
-            say(self.prefix + self._partial)
-            self._partial = ""
-        super().close()
+
+def prefixed_stream(fd: int, prefix: str) -> io.TextIOWrapper:
+    """A text stream (with ``buffer``, ``fileno``, ``encoding``, like ``sys.stdout``) onto file descriptor ``fd``
+    that puts ``prefix`` (a subsim's name) before each line: what a model prints, told apart from the coordinator's
+    output and from other subsims'. Line buffered."""
+    return io.TextIOWrapper(io.BufferedWriter(_PrefixedRaw(fd, prefix.encode())), encoding="utf-8",
+                            errors="backslashreplace", line_buffering=True)

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import zenoh
 
-from cosim.console import PrefixedLines, say
+from cosim.console import prefixed_stream, say
 from cosim.protocol.keys import check_name
 from cosim.protocol.security import SECRET_ENV, ZENOH_AUTH_ENV, ClientSecurity
 from cosim.protocol.transport.server import CommandServer
@@ -192,7 +192,7 @@ def main(model_cls: type[Subsim] | Subsim, argv: Sequence[str] | None = None, pr
     args = parse_args(model_cls, argv, prog)
     if args.quiet_stop:  # launched by cosim run, whose standard output is its results summary: a model's print()
         os.dup2(2, 1)  # goes to stderr, and (from Python) with the subsim's name before each line
-        sys.stdout = PrefixedLines(f"{args.name}: ")
+        sys.stdout = prefixed_stream(2, f"{args.name}: ")
     signal.signal(signal.SIGTERM, _raise_stop)
     signal.signal(signal.SIGINT, _raise_stop)
     try:

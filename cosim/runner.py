@@ -360,6 +360,9 @@ def run_scenario(
     try:
         if saved is not None:
             _restore(session, saved, resume_path(output))
+            if saved.written is None:
+                log(f"cosim: the resume point at t = {saved.point.t:g} was saved by an earlier cosim, without the "
+                    f"sizes and hashes of {output} and its diagnostics: edits to them since are not found")
         spec = scenario.run
         restarts = spec.restarts if restarts is None else restarts
         recovery = None

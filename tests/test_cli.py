@@ -250,6 +250,7 @@ def test_external_subsim_started_by_hand(tmp_path: Path, procs: list) -> None:
 
 
 TALKY = '''
+import sys
 import numpy as np
 from cosim import Port, Subsim
 
@@ -265,6 +266,10 @@ class Talky(Subsim):
         print(f"advancing to {times[-1]:.2f}")
         print("in", end="")
         print(" parts")
+        sys.stdout.buffer.write(b"bytes from " + str(sys.stdout.fileno()).encode() + b"\\n")  # as sys.stdout has them
+        for _ in range(20000):  # 20,000 writes without a newline: quadratic once (80 s for this test)
+            print(".", end="")
+        print()
         return {"x": np.zeros((times.size, 1))}, state
 '''
 
@@ -273,7 +278,8 @@ class Talky(Subsim):
 def test_what_a_model_prints_is_on_stderr_under_its_subsims_name(tmp_path: Path) -> None:
     """A model's print() went, unprefixed, into cosim run's standard output (its summary, which scripts read)."""
     (tmp_path / "talky.py").write_text(TALKY)
-    (tmp_path / "s.toml").write_text('stop = 0.2\n[coupling]\ninterval = 0.1\n[subsims.a]\nmodel = "talky:Talky"\n'
+    (tmp_path / "s.toml").write_text('stop = 0.2\n[coupling]\ninterval = 0.1\nmethod = "distributed"\n'  # one at a time
+                                     '[subsims.a]\nmodel = "talky:Talky"\n'
                                      '[subsims.b]\nmodel = "talky:Talky"\n[[couplings]]\nto = "a.u"\nfrom = "b.x"\n'
                                      '[[couplings]]\nto = "b.u"\nfrom = "a.x"\n')
     done = subprocess.run([*COSIM, "run", "s.toml", "--quiet"], capture_output=True, text=True, timeout=120,
@@ -283,3 +289,4 @@ def test_what_a_model_prints_is_on_stderr_under_its_subsims_name(tmp_path: Path)
     lines = done.stderr.splitlines()
     for name in ("a", "b"):
         assert lines.count(f"{name}: advancing to 0.10") >= 1 and f"{name}: in parts" in lines, done.stderr
+        assert f"{name}: bytes from 2" in lines and f"{name}: {'.' * 20000}" in lines, done.stderr

@@ -106,6 +106,9 @@ def test_a_run_stopped_by_an_error_after_a_resume_point_says_how_to_go_on(tmp_pa
     end = out.read_text().splitlines()[-1].split(",")[0]
     assert lines[1].startswith(f"cosim: every interval to t = {float(end):.6g} s is in {out}; once that is fixed, "
                                "the same command with --resume goes on from t = "), lines[1]
+    again = subprocess.run([*COSIM, "run", str(sc), "--inprocess", "--quiet", "--output", str(out), "--overwrite"],
+                           capture_output=True, text=True, timeout=120)  # (--resume and --overwrite exclude each other)
+    assert "the same command with --resume instead of --overwrite goes on" in again.stderr, again.stderr
 
 
 @pytest.mark.parametrize("suffix", [".csv", ".npz"])

@@ -213,3 +213,24 @@ def test_results_edited_before_the_resume_point_are_not_resumed_from(tmp_path: P
     assert edited.read_bytes() == changed  # refused before anything was cut or written
     edited.write_bytes(original)
     run_scenario(sc, stop=3.0, output=part, inprocess=True, progress=False, resume=True)  # as the run left them
+
+
+def test_a_resume_point_without_the_files_hashes_says_that_edits_are_not_found(tmp_path: Path) -> None:
+    """A resume point saved by the cosim before the hashes went on silently unchecked (red team): it goes on, and
+    says so."""
+    from dataclasses import replace
+
+    from cosim.resume import load as load_resume
+    from cosim.resume import save as save_resume
+
+    sc = every(OSCILLATOR, 10)
+    part = tmp_path / "part.csv"
+    with pytest.raises(Stop):
+        run_scenario(sc, stop=3.0, output=part, inprocess=True, progress=False, on_interval=stop_after(47))
+    saved = load_resume(resume_path(part))
+    assert saved.written is not None
+    save_resume(resume_path(part), replace(saved, written=None))
+    said: list[str] = []
+    run_scenario(sc, stop=3.0, output=part, inprocess=True, progress=False, resume=True, log=said.append)
+    assert said == [f"cosim: the resume point at t = 2 was saved by an earlier cosim, without the sizes and hashes of "
+                    f"{part} and its diagnostics: edits to them since are not found"]

@@ -22,6 +22,7 @@ mode "base" (prescribed base motion, spec mode B). State: (eta, eta_dot).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from typing import Any
 
@@ -155,6 +156,12 @@ def _ports(setup: FlexSetup) -> tuple[dict[str, Port], dict[str, Port]]:
 
 MAX_STEPS = 100_000  # RK4 steps one run_interval may take (about a minute and 50 MB)
 
+def _down(x: float, digits: int = 3) -> float:
+    """``x`` rounded down to ``digits`` significant digits (a bound that, shown, still holds)."""
+    scale = 10.0 ** (math.floor(math.log10(x)) - digits + 1)
+    return math.floor(x / scale) * scale
+
+
 class FlexBody(Subsim):
     """Flexible spacecraft of Storch & Gates (CSDL-R-1582): rigid base + particle appendage, t modes.
 
@@ -173,8 +180,9 @@ class FlexBody(Subsim):
         if omega_max * setup.h > RK4_ACCURATE:  # RK4 is then off by far more than the modes matter (spec §4.1 R5)
             kind = "free-free" if setup.mode == "free" else "constrained"
             raise ValueError(f"parameter 'h' = {setup.h:g} s is too long for the fastest retained mode ({kind}, "
-                             f"{omega_max:.4g} rad/s): omega_max h = {omega_max * setup.h:.3g} > {RK4_ACCURATE} (RK4's "
-                             f"accuracy bound, spec R5); take h <= {RK4_ACCURATE / omega_max:.3g} s or fewer n_modes")
+                             f"{omega_max:.4g} rad/s): omega_max h = {omega_max * setup.h:.4g} > {RK4_ACCURATE} (RK4's "
+                             f"accuracy bound, spec R5); take h <= {_down(RK4_ACCURATE / omega_max):g} s or fewer "
+                             "n_modes")
         self.setup = setup
         self.model = setup.model
         self.split = inertia_split(setup.model)

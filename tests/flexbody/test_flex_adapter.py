@@ -112,12 +112,13 @@ def test_a_step_too_long_for_the_fastest_retained_mode_is_refused():
     with pytest.raises(ValueError) as err:
         FlexBody().initial_state({"n_modes": 8})
     assert str(err.value) == ("parameter 'h' = 0.01 s is too long for the fastest retained mode (free-free, 123.4 "
-                              "rad/s): omega_max h = 1.23 > 0.3 (RK4's accuracy bound, spec R5); take h <= 0.00243 s "
+                              "rad/s): omega_max h = 1.234 > 0.3 (RK4's accuracy bound, spec R5); take h <= 0.00243 s "
                               "or fewer n_modes")
-    FlexBody().initial_state({"n_modes": 8, "h": 0.0024})
+    FlexBody().initial_state({"n_modes": 8, "h": 0.00243})  # the step it suggests fits (rounded down, not up)
     FlexBody().initial_state({"n_modes": 4, "h": 0.012})  # 24.9 rad/s: 0.299
-    with pytest.raises(ValueError, match=r"\(constrained, 25.71 rad/s\): omega_max h = 0.308"):
+    with pytest.raises(ValueError, match=r"\(constrained, 25.71 rad/s\): omega_max h = 0.3085 > 0.3 .* h <= 0.0116 s"):
         FlexBody().initial_state({"mode": "attitude", "n_modes": 8, "h": 0.012})
+    FlexBody().initial_state({"mode": "attitude", "n_modes": 8, "h": 0.0116})  # (0.0117, rounded up, was refused)
 
 
 # ---- controller ------------------------------------------------------------------------------------------
