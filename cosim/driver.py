@@ -445,7 +445,11 @@ class Coordinator:
             notes.append("a model this slow at times needs a longer deadline: timeout (--timeout S, [run] timeout)")
         if not notes:
             return exc
-        return type(exc)(exc.code, f"{exc.message} ({'; '.join(notes)})", exc.subsim, exc.command, exc.traceback)
+        told = type(exc).__new__(type(exc))  # the same error (its kind and what it carries), told more
+        told.__dict__.update(vars(exc))
+        told.message = f"{exc.message} ({'; '.join(notes)})"
+        told.args = (f"{exc.subsim}.{exc.command}: [{exc.code}] {told.message}",)
+        return told
 
     def _used(self) -> int:
         """Restarts used so far."""
