@@ -29,6 +29,7 @@ that cannot serialize its state is refused at ``configure`` (and at start-up whe
 from __future__ import annotations
 
 import copy
+import difflib
 import weakref
 from collections.abc import Mapping
 from pathlib import Path
@@ -226,7 +227,10 @@ class FmuSubsim(Subsim):
         unknown = sorted(k for k in given if k not in info.settable)
         if unknown:
             known = ", ".join(sorted(info.settable)) or "none"
-            raise ValueError(f"unknown FMU variable(s) {unknown} in {info.path.name}; settable: {known} "
+            close = [f"{k!r} for {match[0]!r}" for k in unknown
+                     if (match := difflib.get_close_matches(k, [*info.settable, *SETTINGS], n=1))]
+            hint = f" (did you mean {', '.join(close)}?)" if close else ""
+            raise ValueError(f"unknown FMU variable(s) {unknown} in {info.path.name}{hint}; settable: {known} "
                              f"(subsim settings: {', '.join(sorted(SETTINGS))})")
         return {k: coerce(info.settable[k], v) for k, v in given.items()}
 
