@@ -55,6 +55,7 @@ class Saved:
     point: ResumePoint
     states: dict[str, SubsimState]
     written: Mapping[str, Any] | None = None  # the results files' bytes and SHA-256 up to the point (ResultWriter)
+    models: Mapping[str, str] | None = None  # SHA-256 of each file the subsims' parameters name (an FMU), by path
 
 
 def save(path: Path, saved: Saved) -> None:
@@ -69,7 +70,7 @@ def save(path: Path, saved: Saved) -> None:
     meta = {"format": FORMAT, "fingerprint": saved.fingerprint, "t_start": saved.t_start, "t": saved.point.t,
             "length": saved.point.length,
             "subsims": {name: {"time": st.time, "model": st.model} for name, st in saved.states.items()},
-            "written": saved.written}
+            "written": saved.written, "models": saved.models}
     arrays["meta"] = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
 
     def write(f: io.BufferedIOBase) -> None:
@@ -98,4 +99,15 @@ def load(path: Path) -> Saved:
         raise OutputError(f"{path} is damaged or not a resume point ({type(exc).__name__}: {why}): run it again "
                           "from the start with --overwrite") from None
     point = ResumePoint(float(meta["t"]), meta["length"], previous, magnitudes)
-    return Saved(meta["fingerprint"], float(meta["t_start"]), point, states, meta.get("written"))
+    return Saved(meta["fingerprint"], float(meta["t_start"]), point, states, meta.get("written"), meta.get("models"))
+
+
+def model_files(params: Mapping[str, Mapping[str, Any]]) -> dict[str, str]:
+    """SHA-256 of each file on this machine that a subsim's parameter names (an FMU, a table), by its path: a resume
+    with other files goes on, and says so (fixing a model is a reason to resume)."""
+    out = {}
+    for p in params.values():
+        for value in p.values():
+            if isinstance(value, str) and value and Path(value).is_file():
+                out[value] = hashlib.sha256(Path(value).read_bytes()).hexdigest()
+    return out

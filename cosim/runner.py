@@ -26,7 +26,7 @@ from cosim.progress import Progress
 from cosim.protocol.security import Security
 from cosim.protocol.transport.session import split_endpoint
 from cosim.results import ResultWriter, diag_path, output_units
-from cosim.resume import Saved, fingerprint
+from cosim.resume import Saved, fingerprint, model_files
 from cosim.resume import load as load_resume
 from cosim.resume import save as save_resume
 from cosim.scenario import Scenario, ScenarioError, SubsimSpec
@@ -349,6 +349,7 @@ def run_scenario(
     output = Path(output) if output is not None else default_output(scenario, method)
     lock = reserve_output(output, overwrite or resume) if record else None  # locked before anything is launched
     key = fingerprint(scenario.raw, method)  # what a resume point of this run is saved under
+    models = model_files({name: spec.params for name, spec in scenario.subsims.items()}) if record else {}
     try:
         saved = _resume_point(scenario, method, key, output, stop) if resume else None
         session = open_session(scenario, inprocess=inprocess, listen=listen, log=log, security=security,
@@ -363,6 +364,10 @@ def run_scenario(
             if saved.written is None:
                 log(f"cosim: the resume point at t = {saved.point.t:g} was saved by an earlier cosim, without the "
                     f"sizes and hashes of {output} and its diagnostics: edits to them since are not found")
+            for path, digest in (saved.models or {}).items():
+                if models.get(path) != digest:
+                    log(f"cosim: {path} is not the file the run had when its resume point at t = {saved.point.t:g} "
+                        "was saved: the results before that point came from the earlier one")
         spec = scenario.run
         restarts = spec.restarts if restarts is None else restarts
         recovery = None
@@ -390,7 +395,7 @@ def run_scenario(
                 raise
             while checkpoints and writer.t_last is not None and checkpoints[0].point.t <= writer.t_last:  # written
                 point = checkpoints.pop(0)
-                save_resume(resume_path(output), replace(point, written=writer.written(point.point.t)))
+                save_resume(resume_path(output), replace(point, written=writer.written(point.point.t), models=models))
             bar.update(interval)
             if on_interval is not None:
                 on_interval(interval)

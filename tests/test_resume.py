@@ -234,3 +234,29 @@ def test_a_resume_point_without_the_files_hashes_says_that_edits_are_not_found(t
     run_scenario(sc, stop=3.0, output=part, inprocess=True, progress=False, resume=True, log=said.append)
     assert said == [f"cosim: the resume point at t = 2 was saved by an earlier cosim, without the sizes and hashes of "
                     f"{part} and its diagnostics: edits to them since are not found"]
+
+
+def test_a_resume_with_another_file_a_parameter_names_goes_on_and_says_so(tmp_path: Path, monkeypatch) -> None:
+    """An FMU rebuilt between the stop and the resume: the run went on with the other model and said nothing (FMI
+    probe). Going on is right (fixing a model is a reason to resume), unnoticed is not."""
+    import cosim.runner
+    from cosim.resume import model_files
+
+    fmu = tmp_path / "m.fmu"  # a file a parameter names (params.fmu, as fmu = "m.fmu" makes it)
+    fmu.write_bytes(b"one build")
+    digests = model_files({"a": {"fmu": str(fmu), "k": 1.0, "name": "not a file"}})
+    assert list(digests) == [str(fmu)]
+    monkeypatch.setattr(cosim.runner, "model_files", lambda params: model_files({"a": {"fmu": str(fmu)}}))
+    sc = every(OSCILLATOR, 10)
+    part = tmp_path / "part.csv"
+    with pytest.raises(Stop):
+        run_scenario(sc, stop=3.0, output=part, inprocess=True, progress=False, on_interval=stop_after(47))
+    said: list[str] = []
+    with pytest.raises(Stop):
+        run_scenario(sc, stop=3.0, output=part, inprocess=True, progress=False, resume=True, log=said.append,
+                     on_interval=stop_after(5))
+    assert said == []  # the same file
+    fmu.write_bytes(b"another build")
+    run_scenario(sc, stop=3.0, output=part, inprocess=True, progress=False, resume=True, log=said.append)
+    assert said == [f"cosim: {fmu} is not the file the run had when its resume point at t = 2 was saved: the "
+                    "results before that point came from the earlier one"]
