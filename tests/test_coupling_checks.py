@@ -34,6 +34,16 @@ def test_an_identity_coupling_joins_ports_of_one_unit(source: str, target: str, 
                               "declare the ports in one unit")
 
 
+def test_every_coupling_between_other_units_is_named_at_once() -> None:
+    couplings = [Coupling.make("wheel.omega", "att.omega"), Coupling.make("wheel.phi", "att.phi"),
+                 Coupling.make("wheel.free", "att.raw"), Coupling.make("wheel.phi", "att.omega")]
+    with pytest.raises(CouplingError) as err:
+        check_units(couplings, UNITS_IN, UNITS_OUT)
+    assert err.value.index == 0 and str(err.value).endswith(
+        "or declare the ports in one unit; also [couplings[3]] coupling att.omega -> wheel.phi: units differ, the "
+        "output is in 'rad/s' and the input takes 'rad'"), err.value
+
+
 def test_a_transform_may_convert_units() -> None:
     check_units([Coupling.make("wheel.omega", "att.omega", "gain", {"k": 57.29577951308232})], UNITS_IN, UNITS_OUT)
 

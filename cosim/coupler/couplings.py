@@ -141,16 +141,19 @@ def _check_one(c: Coupling, inputs: Ports, outputs: Ports, driven: dict[SignalRe
 def check_units(couplings: Sequence[Coupling], inputs: Units, outputs: Units) -> None:
     """An identity coupling joins ports of the same unit where both declare one (a transform may convert, so its
     ports are not compared). Units are compared as written: 'rad/s' and 'deg/s' differ, so do 'm/s' and 'm s^-1'.
-    Raises CouplingError naming the coupling."""
+    Raises CouplingError naming the first such coupling, and the others after it (one run to see them all)."""
+    bad = []
     for i, c in enumerate(couplings):
         if c.transform is not identity:
             continue
         src = outputs[c.sources[0].subsim][c.sources[0].port]
         dst = inputs[c.target.subsim][c.target.port]
         if src and dst and src != dst:
-            raise CouplingError(i, f"coupling {c}: units differ, the output is in {src!r} and the input takes "
-                                f"{dst!r}: convert with a transform (transform = \"gain\", params = {{ k = ... }}) or "
-                                "declare the ports in one unit")
+            bad.append((i, f"coupling {c}: units differ, the output is in {src!r} and the input takes {dst!r}"))
+    if bad:
+        others = "".join(f"; also [couplings[{i}]] {text}" for i, text in bad[1:])
+        raise CouplingError(bad[0][0], f"{bad[0][1]}: convert with a transform (transform = \"gain\", params = "
+                            f"{{ k = ... }}) or declare the ports in one unit{others}")
 
 
 def _try_transform(c: Coupling, inputs: Ports, outputs: Ports) -> None:
