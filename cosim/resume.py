@@ -108,6 +108,12 @@ def model_files(params: Mapping[str, Mapping[str, Any]]) -> dict[str, str]:
     out = {}
     for p in params.values():
         for value in p.values():
-            if isinstance(value, str) and value and Path(value).is_file():
-                out[value] = hashlib.sha256(Path(value).read_bytes()).hexdigest()
+            if not isinstance(value, str) or not value:
+                continue
+            try:  # any text may be a parameter's: a long one, a NUL in it
+                if Path(value).is_file():
+                    with open(value, "rb") as f:
+                        out[value] = hashlib.file_digest(f, "sha256").hexdigest()
+            except (OSError, ValueError):
+                continue
     return out

@@ -244,7 +244,7 @@ def test_a_resume_with_another_file_a_parameter_names_goes_on_and_says_so(tmp_pa
 
     fmu = tmp_path / "m.fmu"  # a file a parameter names (params.fmu, as fmu = "m.fmu" makes it)
     fmu.write_bytes(b"one build")
-    digests = model_files({"a": {"fmu": str(fmu), "k": 1.0, "name": "not a file"}})
+    digests = model_files({"a": {"fmu": str(fmu), "k": 1.0, "name": "not a file", "doc": "x" * 5000, "nul": "a\0b"}})
     assert list(digests) == [str(fmu)]
     monkeypatch.setattr(cosim.runner, "model_files", lambda params: model_files({"a": {"fmu": str(fmu)}}))
     sc = every(OSCILLATOR, 10)
