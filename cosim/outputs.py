@@ -72,14 +72,6 @@ def symlink_target(path: Path) -> Path:
     return path.resolve() if path.is_symlink() else path
 
 
-def unstaged(path: Path) -> Path:
-    """The real name of a :func:`staged` one (any other name is its own)."""
-    name = path.name
-    if name.startswith(".") and STAGED in name:
-        return path.with_name(name[1:name.index(STAGED)])
-    return path
-
-
 def lock_path(path: Path) -> Path:
     return path.with_name(path.name + ".lock")
 
@@ -253,9 +245,9 @@ class AppendFile:
         except OSError as exc:
             self.cut(start)
             where = ends_at()
-            reason = "disk full" if exc.errno in (errno.ENOSPC, errno.EDQUOT) else describe_oserror(exc)
-            raise OutputWriteError(f"{reason} writing {self.path} ({self.what}){': ' + where if where else ''}; "
-                              "free space or choose another --output, then run again") from None
+            raise OutputWriteError(f"{failure_reason(exc)} writing {self.path} ({self.what})"
+                                   f"{': ' + where if where else ''}; free space or choose another --output, then run "
+                                   "again") from None
         if os.fstat(self.fd).st_nlink == 0:  # written to a file no name reaches any more: lost at close
             self.size = start
             raise OutputWriteError(f"{self.path} ({self.what}) was removed during the run (by another program?): "
@@ -333,14 +325,18 @@ def _remove_quietly(path: Path) -> None:
         pass
 
 
+def failure_reason(exc: OSError) -> str:
+    """'disk full' (also over a quota), or the system's reason."""
+    return "disk full" if exc.errno in (errno.ENOSPC, errno.EDQUOT) else describe_oserror(exc)
+
+
 def write_failure(exc: OSError, path: Path) -> str:
     """Why writing ``path`` failed and what to do, for a line the user acts on: 'disk full writing x; free space
     or choose another place', 'the directory of x is gone ...', or the system's reason."""
-    if exc.errno in (errno.ENOSPC, errno.EDQUOT):
-        return f"disk full writing {path}; free space or choose another place"
     if exc.errno == errno.ENOENT and not path.parent.exists():
         return f"cannot write {path}: its directory {path.parent} was removed during the run; choose another place"
-    return f"{describe_oserror(exc)} writing {path}; choose another place"
+    free = "free space or " if exc.errno in (errno.ENOSPC, errno.EDQUOT) else ""
+    return f"{failure_reason(exc)} writing {path}; {free}choose another place"
 
 
 # --- the NPZ's streamed samples ------------------------------------------------------------------

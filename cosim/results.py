@@ -49,7 +49,6 @@ from cosim.outputs import (
     stream_header,
     stream_path,
     symlink_target,
-    unstaged,
     write_failure,
     write_npz,
 )
@@ -157,9 +156,10 @@ class ResultWriter:
         except OSError as exc:  # the directory moved or went during the first interval
             self.failed = True
             raise OutputWriteError(f"{write_failure(exc, target)}, then run again") from None
+        targets = {staged(target): target for _, target in self._staged}
         for f in (self._data, self._diag):
             if f is not None:
-                f.path = unstaged(f.path)
+                f.path = targets.get(f.path, f.path)
         names = [name for name, _ in self._staged]
         for path in run_files(self.path):
             if path not in names:
