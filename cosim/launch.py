@@ -35,7 +35,7 @@ from cosim.protocol.security import (
     zenoh_login,
 )
 from cosim.protocol.transport.client import EVERY_QUERYABLE, RemoteHandle
-from cosim.protocol.transport.session import open_router, split_endpoint
+from cosim.protocol.transport.session import UNIX_SOCKET, open_router, split_endpoint
 
 
 def subsim_command(
@@ -254,7 +254,7 @@ class Bus:
         if listen == PRIVATE:
             _sweep_private_dirs()
             private_dir = tempfile.mkdtemp(prefix=PRIVATE_PREFIX)  # mode 0700
-            listen = f"unixsock-stream/{private_dir}/router.sock"
+            listen = f"{UNIX_SOCKET}{private_dir}/router.sock"
         try:
             session, endpoint = open_router(listen, run=run, logins=logins, security=security, servers=servers)
         except BaseException:

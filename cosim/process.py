@@ -28,7 +28,7 @@ from cosim.console import prefixed_stream, say
 from cosim.protocol.keys import check_name
 from cosim.protocol.security import SECRET_ENV, ZENOH_AUTH_ENV, ClientSecurity
 from cosim.protocol.transport.server import CommandServer
-from cosim.protocol.transport.session import client_config, error_text, split_endpoint
+from cosim.protocol.transport.session import UNIX_SOCKET, client_config, error_text, split_endpoint
 from cosim.runtime import DEFAULT_HISTORY, Runtime
 from cosim.subsim import Subsim
 
@@ -118,9 +118,6 @@ def parse_args(model_cls: type[Subsim] | Subsim, argv: Sequence[str] | None,
     if args.queue < 1:
         p.error("--queue must be at least 1")
     return args
-
-
-UNIX_SOCKET = "unixsock-stream/"
 
 
 def unreachable(endpoint: str, timeout: float) -> tuple[str | None, bool]:

@@ -43,6 +43,7 @@ SINGLE_THREAD_RUNTIME = (
 # handshake's 3-4 round trips (TLS included) over a link of up to about 0.7 s round trip; a subsim whose try runs out
 # tries again. (Measured with the larger bound: 150 idle connections still delayed a run by 7 s with 10 s each, not
 # measurably with 3 s.)
+UNIX_SOCKET = "unixsock-stream/"  # an endpoint on a Unix socket: this prefix, then the socket's path
 ACCEPT_TIMEOUT_MS = 3000
 ACCEPT_PENDING_MAX = 10000
 
