@@ -95,10 +95,9 @@ class Settings:
         check_scheme(self.interp, self.samples)
         if not isinstance(self.tol, Tolerance):  # a bare number would fail only at the first check, deep inside
             raise ValueError(f"tol must be a Tolerance(rel, abs), got {self.tol!r}")
-        bad = [k for k, v in dict(self.tolerances).items() if not isinstance(v, Tolerance)]
-        if bad:
-            raise ValueError(f"tolerances must map signal names to Tolerance(rel, abs); {bad[0]!r} maps to "
-                             f"{dict(self.tolerances)[bad[0]]!r}")
+        bad = next(((k, v) for k, v in dict(self.tolerances).items() if not isinstance(v, Tolerance)), None)
+        if bad is not None:
+            raise ValueError(f"tolerances must map signal names to Tolerance(rel, abs); {bad[0]!r} maps to {bad[1]!r}")
         if not _whole(self.max_stages, 2):
             raise ValueError(f"max_stages must be an integer >= 2, got {self.max_stages!r}")
         if not _whole(self.max_halvings, 0):
