@@ -20,6 +20,7 @@ from cosim.preflight import UsageError, check_listen, check_run_options, check_s
 from cosim.protocol.keys import check_name
 from cosim.protocol.security import Security
 from cosim.protocol.transport.session import BusError
+from cosim.resume import load as load_resume
 from cosim.runner import default_output, open_session, run_scenario
 from cosim.scenario import ScenarioError, load
 
@@ -66,8 +67,6 @@ def _run(args: argparse.Namespace) -> int:
 
 def _resume_time(output: Path) -> float | None:
     """The time of the resume point a stopped run left beside ``output``, if it left one that reads."""
-    from cosim.resume import load as load_resume
-
     try:
         return load_resume(resume_path(output)).point.t
     except OutputError:
