@@ -1,20 +1,33 @@
 """cosim: recursive-feedback co-simulation of stand-alone subsim processes over Eclipse Zenoh."""
 
-from typing import Any
+from __future__ import annotations
 
-from cosim.purity import ImpureModel, check_pure
-from cosim.signals import Segment
-from cosim.subsim import ModelError, Param, Port, Subsim
+import importlib
+from typing import TYPE_CHECKING, Any
 
-__all__ = ["ImpureModel", "ModelError", "Param", "Port", "Segment", "Subsim", "check_pure"]
+if TYPE_CHECKING:
+    from cosim.api import run
+    from cosim.purity import ImpureModel, check_pure
+    from cosim.signals import Segment
+    from cosim.subsim import ModelError, Param, Port, Subsim
+
+__all__ = ["ImpureModel", "ModelError", "Param", "Port", "Segment", "Subsim", "check_pure", "run"]
 __version__ = "0.1.0"
+
+# Each name's module, imported on first use: ``import cosim.<anything>`` then loads no NumPy on its own (the
+# ``cosim`` command answers Ctrl-C from its first milliseconds), and a subsim process never loads cosim.run's
+# coordinator side.
+_HOME = {"ImpureModel": "cosim.purity", "check_pure": "cosim.purity", "Segment": "cosim.signals",
+         "ModelError": "cosim.subsim", "Param": "cosim.subsim", "Port": "cosim.subsim", "Subsim": "cosim.subsim",
+         "run": "cosim.api"}
 
 
 def __getattr__(name: str) -> Any:
-    """``cosim.run`` (:func:`cosim.api.run`), imported on first use: a subsim process never loads the
-    coordinator's side."""
-    if name == "run":
-        from cosim.api import run
+    home = _HOME.get(name)
+    if home is None:
+        raise AttributeError(f"module 'cosim' has no attribute {name!r}")
+    return getattr(importlib.import_module(home), name)
 
-        return run
-    raise AttributeError(f"module 'cosim' has no attribute {name!r}")
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_HOME))

@@ -1,0 +1,33 @@
+"""The ``cosim`` command's entry point: Ctrl-C is answered before the command's modules are loaded.
+
+Loading :mod:`cosim.cli` (NumPy, Zenoh, the coordinator) takes about 0.2 s; a SIGINT or SIGTERM then used to
+end in Python's traceback of whatever import it fell into. Until :func:`cosim.cli.entry` runs, one ends the
+command quietly with the shell's status for it (128 + the signal), as the command itself does later."""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+
+_EARLY = (signal.SIGINT, signal.SIGTERM)
+
+
+def _quit(signum: int, _frame: object) -> None:
+    sys.stderr.write(f"cosim: {signal.Signals(signum).name} while starting; nothing was run\n")
+    sys.stderr.flush()
+    os._exit(128 + signum)  # no clean-up to do yet, and none of the half-imported modules' exit hooks
+
+
+def main() -> int:
+    # a signal its parent ignored (a background job's SIGINT) stays ignored
+    before = {s: signal.signal(s, _quit) for s in _EARLY if signal.getsignal(s) is not signal.SIG_IGN}
+    from cosim.cli import entry  # the slow part
+
+    for s, handler in before.items():
+        signal.signal(s, handler)
+    return entry()
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
