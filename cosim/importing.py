@@ -113,7 +113,26 @@ def _where(exc: Exception) -> str:
 def load_model(path: str, search_path: Sequence[str] = ()) -> type[Subsim]:
     """The :class:`cosim.Subsim` subclass at ``package.module:Class``; ValueError naming the path otherwise.
     ``search_path``: as for :func:`import_object`."""
+    if ":" not in str(path):  # e.g. the package name ``spawn_subsim`` or ``python -m`` takes
+        found = _models_in(str(path), search_path)
+        hint = f" (did you mean {' or '.join(repr(f) for f in found)}?)" if found else ""
+        raise ValueError(f"model {path!r} must be 'package.module:Class'{hint}")
     cls = import_object(path, "model", search_path)
     if not (isinstance(cls, type) and issubclass(cls, Subsim)):
         raise ValueError(f"model {path!r} is not a cosim.Subsim subclass")
     return cls
+
+
+def _models_in(module_name: str, search_path: Sequence[str]) -> list[str]:
+    """``module:Class`` of the Subsim subclasses a module, or its ``subsim`` module, defines (for a hint only:
+    whatever fails to import here has none)."""
+    found = []
+    for name in (module_name, f"{module_name}.subsim"):
+        try:
+            _take_own(name.partition(".")[0], search_path)
+            module = importlib.import_module(name)
+        except Exception:
+            continue
+        found += [f"{name}:{k}" for k, v in vars(module).items()
+                  if isinstance(v, type) and issubclass(v, Subsim) and v.__module__ == name]
+    return found

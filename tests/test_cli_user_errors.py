@@ -34,6 +34,11 @@ COSIM = [sys.executable, "-m", "cosim.cli"]
     ('transform = "gain"\nparams = { k = 157.91367041742973 }\n\n[[couplings]]',
      'transform = "linear"\nparams = { gains = [1.0, 2.0] }\n\n[[couplings]]',
      ["[couplings[0]]", "transform 'linear': linear: 1 sources need 1 gains, got 2"]),
+    # a package where a class is needed (as spawn_subsim and python -m take it): the class it holds is named
+    ('model = "subsims.oscillator.subsim:Mass"', 'model = "subsims.oscillator"',
+     ["[subsims.mass1.model]", "must be 'package.module:Class' (did you mean 'subsims.oscillator.subsim:Mass'?)"]),
+    ('model = "subsims.oscillator.subsim:Mass"', 'model = "subsims.no_such_package"',
+     ["[subsims.mass1.model]", "model 'subsims.no_such_package' must be 'package.module:Class'"]),
     # a misspelled table name that breaks the TOML itself
     ('[[couplings]]\nto = "mass2.F"', '[[coupling]]\nto = "mass2.F"', ["not valid TOML", "line 37"]),
 ])
