@@ -63,6 +63,14 @@ class SubsimError(RuntimeError):
         self.traceback = traceback  # the model's traceback as the subsim formatted it (model_exception)
 
 
+class MalformedReply(SubsimError):
+    """The subsim's reply breaks the protocol: undecodable, a Zenoh error reply, or not what its description and
+    the request say (an output missing or misshapen, another t). Its implementation is at fault, not the request."""
+
+    def __init__(self, code: str, message: str, subsim: str, command: str) -> None:
+        super().__init__(code, f"malformed reply: {message}", subsim, command)
+
+
 class SubsimDied(SubsimError):
     """The subsim process went away (liveliness lost or no responder)."""
 

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from cosim.contract import CosimError, SubsimError
+from cosim.contract import PROTOCOL_VERSION, CosimError, MalformedReply, SubsimError
 from cosim.runtime import DEFAULT_HISTORY, Runtime
 from cosim.subsim import Param, Port, Subsim
 
@@ -69,6 +69,10 @@ class SubsimHandle:
 
     name: str
     deadline: float | None = None  # seconds a remote caller waits for a reply (ignored in-process)
+    # Whether replies are checked against the description (what the subsim's runtime guarantees in this process, a
+    # subsim written elsewhere may get wrong): the name and protocol it describes, each run's outputs and times.
+    checks_replies = False
+    outputs: Mapping[str, Port] | None = None  # the described outputs, once described or configured
 
     def _begin(self, cmd: str, args: dict[str, Any]) -> Callable[[], dict]:
         """Send ``cmd``; return a function that waits for and returns its checked result."""
@@ -83,10 +87,25 @@ class SubsimHandle:
         return self._begin(cmd, args)()
 
     def describe(self) -> Description:
-        return Description.from_result(self._call("describe"))
+        return self._described("describe", self._call("describe"))
 
     def configure(self, params: Mapping[str, Any], t0: float = 0.0) -> Description:
-        return Description.from_result(self._call("configure", params=dict(params), t0=float(t0)))
+        return self._described("configure", self._call("configure", params=dict(params), t0=float(t0)))
+
+    def _described(self, cmd: str, result: Mapping[str, Any]) -> Description:
+        d = Description.from_result(result)
+        if self.checks_replies:
+            if d.name != self.name:
+                raise self._malformed(cmd, f"it describes itself as {d.name!r}, but serves as {self.name!r} (the "
+                                           "description's name is the name it was started with, its --name)")
+            if d.protocol != PROTOCOL_VERSION:
+                raise MalformedReply("version", f"it speaks protocol {d.protocol!r}, this coordinator "
+                                     f"{PROTOCOL_VERSION}", self.name, cmd)
+        self.outputs = d.outputs
+        return d
+
+    def _malformed(self, cmd: str, message: str) -> MalformedReply:
+        return MalformedReply("bad_value", message, self.name, cmd)
 
     def start_run_interval(
         self, times: np.ndarray, inputs: Mapping[str, np.ndarray], interp: str = "linear", commit: bool = False
@@ -96,7 +115,33 @@ class SubsimHandle:
         if commit:
             args["commit"] = True
         wait = self._begin("run_interval", args)
+        if self.checks_replies and self.outputs is not None:
+            return lambda: self._checked(wait(), args["t"])
         return lambda: _interval_result(wait())
+
+    def _checked(self, r: dict, times: np.ndarray) -> IntervalResult:
+        """A run_interval reply that holds what the description and the request say it must, or a one-line error
+        naming what it got wrong (a missing output reached the results writer as a KeyError)."""
+        outputs, described = r["outputs"], self.outputs
+        assert described is not None
+        if outputs.keys() != described.keys():
+            missing, unknown = sorted(described.keys() - outputs.keys()), sorted(outputs.keys() - described.keys())
+            parts = [f"missing output(s) {missing}"] if missing else []
+            parts += [f"unknown output(s) {unknown}"] if unknown else []
+            raise self._malformed("run_interval", f"{'; '.join(parts)} (described: "
+                                                  f"{', '.join(described) or 'none'})")
+        n = len(times)
+        for name, port in described.items():
+            if outputs[name].shape != (n, port.size):
+                raise self._malformed("run_interval", f"output {name!r} has shape {list(outputs[name].shape)}, "
+                                      f"needs [{n}, {port.size}] ({n} samples of its size {port.size})")
+        t = r["t"]
+        if t.shape != times.shape or t.tobytes() != times.tobytes():
+            raise self._malformed("run_interval", "t is not the request's t, bit for bit (it is echoed)")
+        if r["end_time"] != times[-1]:
+            raise self._malformed("run_interval", f"end_time {r['end_time']!r} is not the request's last time "
+                                                  f"{float(times[-1])!r}")
+        return IntervalResult(t, outputs, r["end_time"])
 
     def run_interval(
         self, times: np.ndarray, inputs: Mapping[str, np.ndarray], interp: str = "linear", commit: bool = False

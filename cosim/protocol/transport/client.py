@@ -11,7 +11,7 @@ from typing import Any
 
 import zenoh
 
-from cosim.contract import ProtocolError, SubsimDied, SubsimError, SubsimHung, SubsimLeft
+from cosim.contract import MalformedReply, ProtocolError, SubsimDied, SubsimError, SubsimHung, SubsimLeft
 from cosim.handles import SubsimHandle
 from cosim.protocol.keys import alive_key, check_name, rpc_key
 from cosim.protocol.messages import ErrorInfo, decode_reply, encode_request, next_seq, sealer
@@ -21,6 +21,8 @@ GONE_GRACE = 0.3  # seconds a request may still be answered after its subsim's l
 DEFAULT_LEASE = 10.0  # s a subsim waits for a silent coordinator by default (cosim.process --lease)
 LEFT_AFTER = 0.8  # a death after a pause of this part of the subsim's lease or more is taken as caused by it
 PAUSE_REMEMBERED = 30.0  # s: a pause that ended longer before a death was found explains none
+DIED_MID_REQUEST = "the process died during the request"
+GONE = "the subsim process is gone"
 SILENT_LIMIT = 15.0  # seconds a serving process (its token there, past a cut link's 10 s lease) may leave us unanswered
 # Every queryable on a subsim's key gets its requests (not only the best match): another login holder's queryable
 # declared there as complete would otherwise take them all and black-hole the subsim (its replies are forged anyway).
@@ -138,13 +140,14 @@ _WATCHDOG = _Watchdog()
 class RemoteHandle(SubsimHandle):
     """Zenoh request/reply to ``cosim/<run>/<name>/rpc``; liveliness reports a dead process at once.
 
-
     ``timeout``: zenoh's own limit on a query. ``deadline`` (seconds, or None): how long a caller waits for
     a reply before it calls the subsim hung (``SubsimHung``); the driver sets it from measured request
     times, so a stopped or stuck process is found long before ``timeout``.
 
     With ``key`` (the subsim's key, :func:`cosim.protocol.security.subsim_key`) every request is sealed
     and only a reply carrying the subsim's tag for that request is believed (docs/protocol.md 4.1)."""
+
+    checks_replies = True  # the process may be anyone's implementation of the protocol
 
     def __init__(
         self, session: zenoh.Session, run: str, name: str, timeout: float = 60.0, key: bytes | None = None
@@ -160,6 +163,7 @@ class RemoteHandle(SubsimHandle):
         self.lease = DEFAULT_LEASE  # s the subsim waits for a silent coordinator before it leaves (its --lease)
         self._born = time.monotonic()  # a pause before its process was asked for made no process of it leave
         self._server: Any = None  # the Zenoh id of the process that answers (its first valid reply's)
+        self._server_lost = False  # a token of this name went since ``_server`` answered: it may be another's now
         self._in_flight: set[_Pending] = set()
         # A declared querier costs about 35 us less per request than session.get; its timeout is fixed at
         # declaration. Zenoh keeps a task of about 1.1 KB per query for the query's whole timeout, however soon
@@ -181,6 +185,7 @@ class RemoteHandle(SubsimHandle):
         else:
             self._alive.clear()
             self._died.set()
+            self._server_lost = self._server is not None
             # no reply will come, unless one is already on its way (a subsim replies to shutdown, then leaves):
             # give that one a moment, then wake the waiter
             soon = time.monotonic() + GONE_GRACE
@@ -246,7 +251,7 @@ class RemoteHandle(SubsimHandle):
 
     def _begin(self, cmd: str, args: dict[str, Any]) -> Callable[[], dict]:
         if self._died.is_set() and not self._still_served():
-            raise self._died_error("the subsim process is gone (liveliness lost)", cmd)
+            raise self._died_error(GONE, cmd)
         seq, payload = self._seal(encode_request(cmd, args))
         token = zenoh.CancellationToken()
         deadline = self.deadline
@@ -294,6 +299,9 @@ class RemoteHandle(SubsimHandle):
                 server = reply.replier_id.zid
                 if self._server is None:
                     self._server = server
+                elif server != self._server and self._server_lost:  # its process died, and one started since
+                    raise self._died_error("its process died, and the process now serving its name was started "
+                                           "since (it holds none of this run's state)", cmd)
                 elif server != self._server:  # sealed with its key: a second copy of this subsim, started by hand
                     raise SubsimError("duplicate", f"a second process answers as {self.name!r} (Zenoh id {server}, "
                                       f"besides {self._server}): it was started twice; stop one of them and run "
@@ -301,7 +309,7 @@ class RemoteHandle(SubsimHandle):
                 try:
                     result = decode_reply(cmd, body)
                 except ProtocolError as exc:
-                    raise SubsimError(exc.code, f"malformed reply: {exc.message}", self.name, cmd) from None
+                    raise MalformedReply(exc.code, exc.message, self.name, cmd) from None
                 if isinstance(result, ErrorInfo):
                     raise SubsimError(result.code, result.message, result.subsim,
                                       cmd if result.command == "?" else result.command, result.traceback)
@@ -314,12 +322,23 @@ class RemoteHandle(SubsimHandle):
             _WATCHDOG.forget(pending)
 
     def _zenoh_error(self, cmd: str, reply: zenoh.Reply, pending: _Pending) -> SubsimError:
-        """What an error reply from zenoh itself (not from the subsim) means."""
+        """What a Zenoh-level error reply means: zenoh's own timeout, or (well before it) a subsim's reply_err."""
         text = reply.err.payload.to_bytes().decode(errors="replace")
+        early = pending.timeout_at - time.monotonic() > min(0.5, 0.1 * (pending.timeout_at - pending.sent))
+        if early and not self._died.is_set():  # a queryable's reply_err (zenoh's timeout comes from a router too)
+            return MalformedReply("bad_value", f"it answered with a Zenoh error reply ({text[:80]!r}) "
+                               "instead of a protocol reply; an error goes in a protocol reply, {\"ok\": false, "
+                               "\"error\": {...}} (docs/protocol.md 7)", self.name, cmd)
         if self._died.is_set():
-            return self._died_error(f"the process died during the request ({text})", cmd)
-        return self._lost_in_pause(cmd, pending) or SubsimError(
-            "timeout", f"no reply within {self.timeout:g} s ({text})", self.name, cmd)
+            return self._died_error(DIED_MID_REQUEST, cmd)
+        return self._lost_in_pause(cmd, pending) or self._timed_out(cmd, pending)
+
+    def _timed_out(self, cmd: str, pending: _Pending) -> SubsimError:
+        """Zenoh's own timeout ended the query: the process is stuck or stopped, as at a missed deadline (so its
+        stop kills it at once instead of asking it to shut down and waiting out the graces)."""
+        self.hung = True
+        limit = round(pending.timeout_at - pending.sent, 3)
+        return SubsimError("timeout", f"no reply within {limit:g} s (hung or stopped?)", self.name, cmd)
 
     def _lost_in_pause(self, cmd: str, pending: _Pending) -> SubsimHung | None:
         """The query timed out while this process was not running: the reply is lost, maybe not the subsim. It
@@ -340,18 +359,30 @@ class RemoteHandle(SubsimHandle):
                               self.name, cmd)
         if forged:
             return SubsimError("unauthenticated", f"{forged} reply(ies) without this subsim's tag: is it running "
-                               "with the key cosim gave it (COSIM_SECRET)?", self.name, cmd)
+                               "with the key cosim gave it (COSIM_SECRET), and does it seal its replies as "
+                               "docs/protocol.md 4.1 says (the tag covers the request's seq)?", self.name, cmd)
         # zero replies: nobody serves the key (not started, or died mid-request), or zenoh's timeout ended the
         # query without its error reply (seen under load)
         self._died.wait(0.5 if self._alive.is_set() else 0.0)
         if not self._died.is_set() and self._alive.is_set() and time.monotonic() >= pending.timeout_at:
-            return self._lost_in_pause(cmd, pending) or SubsimError("timeout", f"no reply within {self.timeout:g} s",
-                                                                    self.name, cmd)
-        reason = "the process died during the request" if self._died.is_set() else "no process serves this subsim"
+            return self._lost_in_pause(cmd, pending) or self._timed_out(cmd, pending)
+        if self._died.is_set():
+            reason = DIED_MID_REQUEST
+        elif self._alive.is_set():  # its token is up and the query ended: the process dropped it unanswered
+            reason = ("its process ended the request without a reply (its token is still up): a subsim answers "
+                      "every request it admits with exactly one reply (docs/protocol.md 1)")
+        else:
+            reason = "no process serves this subsim"
         return self._died_error(reason, cmd)
 
     def _died_error(self, reason: str, cmd: str) -> SubsimDied:
         status = None if self.exit_status is None else self.exit_status()
+        if status is None and reason in (DIED_MID_REQUEST, GONE):  # not known to have exited: it may not have
+            when = " during the request" if reason == DIED_MID_REQUEST else ""
+            why = (" while its process still runs: its link" if self.exit_status is not None else
+                   ": the process died, or its link")
+            reason = (f"its liveliness token went{when}{why} was silent for longer than its {self.lease:g} s lease "
+                      "(cut, or the process stopped)")
         reason = reason if status is None else f"{reason}: {status}"
         pause = _WATCHDOG.long_pause(time.monotonic() - PAUSE_REMEMBERED, LEFT_AFTER * self.lease)
         if pause is not None and pause[0] > self._born and "killed by" not in (status or ""):
