@@ -14,7 +14,7 @@ from types import MappingProxyType
 
 from cosim import interrupt
 from cosim.console import say
-from cosim.contract import SubsimError
+from cosim.contract import MalformedReply, SubsimError
 from cosim.coupler.couplings import CouplingError, SignalRef
 from cosim.coupler.plan import Plan
 from cosim.coupler.relaxation import Interval, RunSummary
@@ -29,7 +29,7 @@ from cosim.results import ResultWriter, diag_path, output_units
 from cosim.resume import Saved, fingerprint, model_files
 from cosim.resume import load as load_resume
 from cosim.resume import save as save_resume
-from cosim.scenario import Scenario, ScenarioError, SubsimSpec
+from cosim.scenario import RunSpec, Scenario, ScenarioError, SubsimSpec
 
 Log = Callable[[str], None]
 
@@ -75,6 +75,7 @@ class Session:
     external_wait: float = 300.0
     timeout: float = 120.0
     log: Log = say
+    listen: str | None = None  # the router endpoint asked for (--listen): what external subsims are told
 
     def revive(self, name: str) -> SubsimHandle:
         """A new process for a subsim that died or hung, configured as at the run's start: a launched one is
@@ -83,9 +84,9 @@ class Session:
             raise ScenarioError(f"{self.scenario.path}: {name} failed in-process: nothing to restart")
         spec = self.scenario.subsims[name]
         if spec.external:  # nothing else is printed until it is back: say what is awaited, and from whom
-            self.log(f"cosim: external subsim {name!r} is gone; waiting up to {self.external_wait:g} s for it to "
-                     "attach again (start it with the same command and the same two variables, once the old process "
-                     "has exited: two copies answering as one stop the run)")
+            self.log(f"cosim: external subsim {name!r} must attach again; waiting up to {self.external_wait:g} s for "
+                     "it (once the old process has exited: two copies answering as one stop the run)\n"
+                     + attach_lines(self.bus, self.scenario, name, self.listen, first=False))
             handle: SubsimHandle = self.bus.attach(name, timeout=self.timeout, wait=self.external_wait)
         elif spec.launcher:
             handle = self._respawn_elsewhere(name)
@@ -167,28 +168,30 @@ def open_session(
             except ValueError as exc:
                 bus.close()
                 raise ScenarioError(f"{scenario.path}: [subsims.{name}] {exc}") from None
-    session = Session(scenario, handles, {}, bus, external_wait=external_wait, timeout=timeout, log=log)
+    session = Session(scenario, handles, {}, bus, external_wait=external_wait, timeout=timeout, log=log, listen=listen)
     try:
         if bus is not None:
+            external = [name for name, spec in scenario.subsims.items() if spec.external]
+            for name in external:  # every external subsim's command at once: their operators start them in parallel
+                log(attach_lines(bus, scenario, name, listen, first=True))
+            if external:
+                names = "subsim" + ("s " if len(external) > 1 else " ") + ", ".join(map(repr, external))
+                log(f"cosim: waiting up to {external_wait:g} s for external {names}")
             for name, spec in scenario.subsims.items():
-                if spec.external:
-                    endpoint, hint = attach_endpoint(listen, bus.endpoint)
-                    cmd = bus.command("<your.subsim.module>", name, spec.model, endpoint=endpoint, python="python")
-                    env = " ".join(f"{k}={v}" for k, v in bus.subsim_env(name).items())
-                    log("cosim-attach " + json.dumps({"endpoint": endpoint, "run": bus.run, "name": name,
-                                                      "command": cmd, "env": bus.subsim_env(name)}))
-                    log(f"cosim: waiting up to {external_wait:g} s for external subsim {name!r}; start it with:\n"
-                        f"  {env} {' '.join(cmd)}\n"
-                        f"  (the two variables are this subsim's secrets: hand them over privately)\n  ({hint})")
-                    handles[name] = bus.attach(name, timeout=timeout, wait=external_wait)
-                else:
+                if not spec.external:
                     process = bus.spawn("", name, timeout=timeout, model=spec.model, lease=scenario.run.lease,
                                         elsewhere=away.get(name))
                     handles[name] = process.handle
+            waited_until = time.monotonic() + external_wait
+            for name in external:  # one wait for all of them (a floor each, for the attach itself)
+                wait = max(waited_until - time.monotonic(), min(ATTACH_FLOOR, external_wait))
+                handles[name] = bus.attach(name, timeout=timeout, wait=wait)
         for name, spec in scenario.subsims.items():
             try:
                 session.descriptions[name] = handles[name].configure(spec.params, t0=scenario.start)
             except SubsimError as exc:
+                if exc.code not in PARAMS_REFUSED or isinstance(exc, MalformedReply):  # not about its parameters
+                    raise
                 trace = f"\nthe model's traceback:\n{exc.traceback.rstrip()}" if exc.traceback else ""
                 raise ScenarioError(f"{scenario.path}: [subsims.{name}.params] {exc.message}{trace}") from None
         session.plans = {method: build_plan(scenario, session.descriptions, method) for method in scenario.settings}
@@ -204,9 +207,26 @@ def open_session(
     return session
 
 
+PARAMS_REFUSED = frozenset({"bad_value", "model_error", "model_exception"})  # configure's errors about its params
+ATTACH_FLOOR = 10.0  # s each external subsim is waited for at least, once the run's wait for them all is over
 RETRY_ELSEWHERE = 5.0  # s between tries to start a lost subsim on another machine again
 AWAY_FLOOR = 10.0  # s: the shortest automatic deadline when a subsim is on another machine (a Zenoh lease: a
 # network blip shorter than that is waited out, not taken for a hang that costs a restart)
+
+
+def attach_lines(bus: Bus, scenario: Scenario, name: str, listen: str | None, first: bool) -> str:
+    """What an external subsim's operator needs to start it: the machine-readable ``cosim-attach`` line (``first``:
+    at the run's start only) and the command with its two secrets."""
+    endpoint, hint = attach_endpoint(listen, bus.endpoint)
+    lease = scenario.run.lease if scenario.run.lease != RunSpec.lease else None  # the process's own default
+    cmd = bus.command("<your.subsim.module>", name, scenario.subsims[name].model, endpoint=endpoint, python="python",
+                      lease=lease)
+    env = bus.subsim_env(name)
+    shown = " ".join(f"{k}={v}" for k, v in env.items())
+    machine = "cosim-attach " + json.dumps({"endpoint": endpoint, "run": bus.run, "name": name, "command": cmd,
+                                            "env": env}) + "\n" if first else ""
+    return (f"{machine}cosim: external subsim {name!r}: start it with:\n  {shown} {' '.join(cmd)}\n"
+            f"  (the two variables are this subsim's secrets: hand them over privately)\n  ({hint})")
 
 
 def attach_endpoint(listen: str | None, endpoint: str) -> tuple[str, str]:

@@ -128,7 +128,8 @@ KEYS: dict[str, dict[str, Key]] = {
                        "and 3 times the slowest recent request (30 s for the first few)"),
         "checkpoint_every": Key("integer", "200", "", "intervals between checkpoints of every subsim's state (for "
                                 "replacements, and the resume points of `cosim run --resume`)"),
-        "lease": Key("number", "10", "s", "Zenoh link lease of launched subsims: how long a silent link lives"),
+        "lease": Key("number", "10", "s", "Zenoh link lease of the subsims: how long a silent link lives (an external "
+                                          "subsim's printed command carries it as --lease)"),
     },
     "security": {
         "tls_cert": Key("string", "none", "", "router certificate (PEM); with tls_key the router listens on tls/"),

@@ -123,3 +123,23 @@ def test_a_launchers_line_goes_to_its_workdir_as_written(tmp_path: Path, workdir
                           env={**os.environ, "HOME": str(home)})
     assert done.returncode == 0, done.stderr
     assert done.stdout.splitlines() == [where.format(home=home, cwd=cwd), "key"]
+
+
+def test_every_external_subsims_command_comes_before_the_wait_and_carries_the_runs_lease(tmp_path: Path) -> None:
+    """Two external subsims: the second's command (and secrets) came only once the first had attached, so two
+    sites could not start theirs at the same time; and a [run] lease did not reach them (multi-host probe)."""
+    sc = tmp_path / "both.toml"
+    text = OSCILLATOR.read_text().replace('model = "subsims.oscillator.subsim:Mass"',
+                                          'model = "subsims.oscillator.subsim:Mass"\nexternal = true')
+    assert text.count("external = true") == 2
+    sc.write_text(text + "\n[run]\nlease = 30\n")
+    done = subprocess.run([*COSIM, "run", str(sc), "--quiet", "--attach-wait", "1", "--output",
+                           str(tmp_path / "x.csv")], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 1
+    attach = [json.loads(x.removeprefix("cosim-attach ")) for x in done.stderr.splitlines()
+              if x.startswith("cosim-attach ")]
+    assert [a["name"] for a in attach] == ["mass1", "mass2"]
+    assert all(a["command"][-2:] == ["--lease", "30"] for a in attach), attach
+    assert done.stderr.index("cosim-attach ") < done.stderr.index("waiting up to 1 s for external subsims 'mass1', "
+                                                                   "'mass2'")
+    assert done.stderr.rindex("cosim-attach ") < done.stderr.index("waiting up to")

@@ -393,7 +393,7 @@ def test_an_external_subsim_that_disappears_is_waited_for_and_restored(tmp_path:
         _, err = coord.communicate(timeout=300)
         assert coord.returncode == 0, err
         assert "mass2 died" in err
-        waiting = "cosim: external subsim 'mass2' is gone; waiting up to 300 s for it to attach again"
+        waiting = "cosim: external subsim 'mass2' must attach again; waiting up to 300 s for it"
         assert err.index(waiting) < err.index("mass2 died")  # said while waiting, not only once it is back
         assert (tmp_path / "ext.csv").read_bytes() == (tmp_path / "clean.csv").read_bytes()
     finally:
