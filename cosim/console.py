@@ -9,6 +9,7 @@ from __future__ import annotations
 import io
 import os
 import sys
+import threading
 
 
 def say(line: str) -> None:
@@ -57,3 +58,48 @@ def prefixed_stream(fd: int, prefix: str) -> io.TextIOWrapper:
     output and from other subsims'. Line buffered."""
     return io.TextIOWrapper(io.BufferedWriter(_PrefixedRaw(fd, prefix.encode())), encoding="utf-8",
                             errors="backslashreplace", line_buffering=True)
+
+
+class StderrRelay:
+    """A child process's stderr, copied to this process's as it comes (a thread blocked in ``read``), with its last
+    bytes kept: the line a process that failed to start left there (a model's ``__init__`` raising, a syntax error
+    in a package's ``__main__``) belongs in the error that says it exited, not only on a terminal."""
+
+    KEPT = 4096  # bytes of the end kept
+
+    def __init__(self, pipe: io.BufferedReader | None) -> None:
+        self._tail = b""
+        self._fd = None if pipe is None else pipe.fileno()
+        self._thread = None
+        if pipe is not None:
+            self._pipe = pipe
+            self._thread = threading.Thread(target=self._copy, daemon=True, name="subsim-stderr")
+            self._thread.start()
+
+    def _copy(self) -> None:
+        out = 2
+        while True:
+            try:
+                data = os.read(self._fd, 65536)  # type: ignore[arg-type]
+            except OSError:
+                break
+            if not data:
+                break
+            self._tail = (self._tail + data)[-self.KEPT:]
+            while data and out >= 0:
+                try:
+                    data = data[os.write(out, data):]
+                except OSError:  # our stderr is gone: keep draining the child's (it must never block on it)
+                    out = -1
+        self._pipe.close()
+
+    def finish(self, timeout: float = 1.0) -> None:
+        """Wait (up to ``timeout`` s) until everything the child wrote is copied: its stderr closed, as at its end."""
+        if self._thread is not None:
+            self._thread.join(timeout)
+
+    def last_line(self, timeout: float = 0.5) -> str | None:
+        """The child's last non-blank line on stderr (at most 200 characters), once it is copied; None if none."""
+        self.finish(timeout)
+        lines = [x.strip() for x in self._tail.decode(errors="replace").splitlines() if x.strip()]
+        return None if not lines else lines[-1][:200]

@@ -21,6 +21,7 @@ from pathlib import Path
 
 import zenoh
 
+from cosim.console import StderrRelay
 from cosim.contract import SubsimError
 from cosim.importing import MODULE_PATH_ENV, SEARCH_PATH
 from cosim.protocol.keys import check_name, coordinator_alive_key, new_run_id, rpc_key
@@ -112,21 +113,26 @@ def launcher_line(argv: Sequence[str], workdir: str | None) -> str:
             f"export {SECRET_ENV} {ZENOH_AUTH_ENV} PYTHONUNBUFFERED=1 && exec {shlex.join(argv)}")
 
 
-def exit_status(popen: subprocess.Popen, elsewhere: Elsewhere | None = None, wait: float = 0.0) -> str | None:
+def exit_status(popen: subprocess.Popen, elsewhere: Elsewhere | None = None, wait: float = 0.0,
+                relay: StderrRelay | None = None) -> str | None:
     """How a subsim's process ended ("its process was killed by SIGSEGV"), waiting up to ``wait`` seconds for it
-    to be reaped; None while it runs. Started ``elsewhere``, the process here is its launcher."""
+    to be reaped; None while it runs. Started ``elsewhere``, the process here is its launcher. With the ``relay``
+    of its stderr, an exit with an error says the last line it wrote (why a model failed to start)."""
     try:
         code = popen.wait(wait)
     except subprocess.TimeoutExpired:
         return None
     what = "process" if elsewhere is None else f"launcher {elsewhere.shown!r}"
     if code >= 0:
-        return f"its {what} exited with code {code}"
-    try:
-        name = signal.Signals(-code).name
-    except ValueError:
-        name = f"signal {-code}"
-    return f"its {what} was killed by {name}"
+        status = f"its {what} exited with code {code}"
+    else:
+        try:
+            name = signal.Signals(-code).name
+        except ValueError:
+            name = f"signal {-code}"
+        status = f"its {what} was killed by {name}"
+    last = None if relay is None or code in (0, -signal.SIGKILL, -signal.SIGTERM) else relay.last_line()
+    return status if last is None else f"{status}; the last line it wrote: {last}"
 
 
 def terminate(popen: subprocess.Popen, grace: float = 3.0) -> int:
@@ -151,6 +157,13 @@ class SubsimProcess:
     model: str | None = None
     lease: float | None = None
     elsewhere: Elsewhere | None = None  # started through a launcher: popen is the launcher
+    relay: StderrRelay | None = None  # its stderr, copied to ours
+
+    def reaped(self, code: int) -> int:
+        """``code``, once what the process wrote on stderr is all copied."""
+        if self.relay is not None:
+            self.relay.finish()
+        return code
 
     def stop(self, grace: float = 3.0) -> int:
         """Ask for ``shutdown``, then SIGTERM, then SIGKILL; always reaps the process. One known to be hung
@@ -158,7 +171,7 @@ class SubsimProcess:
         if self.popen.poll() is None and getattr(self.handle, "hung", False):
             self.popen.kill()
             self.handle.close()
-            return self.popen.wait()
+            return self.reaped(self.popen.wait())
         if self.popen.poll() is None and self.handle.alive:
             try:
                 self.handle.timeout = min(self.handle.timeout, grace)  # the handle is closed below anyway
@@ -166,9 +179,9 @@ class SubsimProcess:
             except Exception:
                 pass
         try:
-            return self.popen.wait(grace)
+            return self.reaped(self.popen.wait(grace))
         except subprocess.TimeoutExpired:
-            return terminate(self.popen, grace)
+            return self.reaped(terminate(self.popen, grace))
         finally:
             self.handle.close()
 
@@ -340,7 +353,7 @@ class Bus:
                 env=env,
                 stdin=None if elsewhere is None else subprocess.PIPE,
                 stdout=subprocess.DEVNULL if quiet else None,
-                stderr=subprocess.DEVNULL if quiet else None,
+                stderr=subprocess.DEVNULL if quiet else subprocess.PIPE,  # copied to ours by a StderrRelay
                 # its own process group: a Ctrl-C at the terminal reaches the coordinator only, which stops its
                 # subsims in order (they would otherwise each print their own stop line)
                 process_group=0,
@@ -354,14 +367,15 @@ class Bus:
                 popen.stdin.close()
             except OSError:  # the launcher is gone already: its exit is reported below
                 pass
+        relay = StderrRelay(popen.stderr)
         handle = RemoteHandle(self.session, self.run, name, timeout=timeout, key=self.key(name))
-        handle.exit_status = partial(exit_status, popen, elsewhere, DEATH_REAPED)
+        handle.exit_status = partial(exit_status, popen, elsewhere, DEATH_REAPED, relay)
         if lease:
             handle.lease = lease
-        proc = SubsimProcess(name, popen, handle, module, model, lease, elsewhere)
+        proc = SubsimProcess(name, popen, handle, module, model, lease, elsewhere, relay)
         self.processes.append(proc)
         try:
-            _wait_ready_or_exit(handle, popen, wait, elsewhere)
+            _wait_ready_or_exit(handle, popen, wait, elsewhere, relay)
         except BaseException:
             proc.stop(grace=1.0)
             raise
@@ -374,7 +388,7 @@ class Bus:
         for old in [p for p in self.processes if p.name == name]:  # none if its last start failed to make one
             if old.popen.poll() is None:
                 old.popen.kill()
-            old.popen.wait()
+            old.reaped(old.popen.wait())
             old.handle.close()
             self.processes.remove(old)
         module, model, lease, elsewhere = self._spawned_as[name]
@@ -427,10 +441,10 @@ class Bus:
 
 
 def _wait_ready_or_exit(handle: RemoteHandle, popen: subprocess.Popen, wait: float,
-                        elsewhere: Elsewhere | None = None) -> None:
+                        elsewhere: Elsewhere | None = None, relay: StderrRelay | None = None) -> None:
     deadline = time.monotonic() + wait
     while time.monotonic() < deadline:
-        status = exit_status(popen, elsewhere)
+        status = exit_status(popen, elsewhere, relay=relay)
         if status is not None:
             raise SubsimError("no_responder", status, handle.name, "spawn")
         if handle.wait_alive(0.05):

@@ -36,18 +36,23 @@ def cosim_bus() -> Iterator[Bus]:
 
 @pytest.fixture
 def spawn_subsim(cosim_bus: Bus) -> Callable[..., RemoteHandle]:
-    """Factory: ``spawn_subsim(target, name=None, timeout=60.0) -> RemoteHandle``.
+    """Factory: ``spawn_subsim(target, name=None, timeout=60.0, start_timeout=20.0) -> RemoteHandle``.
 
     ``target`` is a subsim package run as ``python -m target`` (``"subsims.oscillator"``) or any model
     class as ``"module:Class"``, served by ``python -m cosim.serve`` (``"wall_mass:WallMass"``). The
     process starts in the test's working directory, so modules there are found. ``name`` defaults to
-    the last part of the module name."""
+    the last part of the module name. ``timeout``: seconds each request may take before it fails as hung (a
+    model stuck in ``advance`` fails the test then); ``start_timeout``: seconds the process has to come up (a
+    model whose imports are slow). A process that exits before it is up fails the test with its exit status and
+    the last line it wrote on stderr (its traceback's last line, say); what a subsim prints reaches the test's
+    stderr (``capfd`` reads it)."""
 
-    def spawn(target: str, name: str | None = None, timeout: float = 60.0) -> RemoteHandle:
+    def spawn(target: str, name: str | None = None, timeout: float = 60.0,
+              start_timeout: float = 20.0) -> RemoteHandle:
         _check_importable(target)
         module, _, cls = target.partition(":")
         name = name or module.rsplit(".", 1)[-1]
-        return cosim_bus.spawn(module, name, timeout=timeout, model=target if cls else None).handle
+        return cosim_bus.spawn(module, name, timeout=timeout, wait=start_timeout, model=target if cls else None).handle
 
     return spawn
 

@@ -315,3 +315,29 @@ def test_a_death_is_put_down_to_a_pause_of_the_coordinator_only_when_that_explai
     assert kind(now - 5.0, exited) is SubsimDied  # its process was started after the pause began
     assert kind(now - 100.0, exited, (now - 60.0, now - 45.0)) is SubsimDied  # a pause that ended 45 s ago
     assert kind(now - 100.0, exited, (now - 6.0, now - 1.0)) is SubsimDied  # shorter than its lease
+
+
+def test_a_model_that_fails_to_start_is_named_with_the_last_line_its_process_wrote(
+        spawn_subsim, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A model whose __init__ raises: the error said only 'its process exited with code 1', the reason was left in
+    the test's captured stderr (test-author probe)."""
+    (tmp_path / "bad_init.py").write_text(
+        "from cosim import Port, Subsim\n\n\nclass Bad(Subsim):\n    outputs = {'y': Port(1)}\n\n"
+        "    def __init__(self):\n        raise RuntimeError('calibration file /data/cal.csv not found')\n")
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SubsimError) as err:
+        spawn_subsim("bad_init:Bad", name="bad")
+    assert str(err.value) == ("bad.spawn: [no_responder] its process exited with code 1; the last line it wrote: "
+                              "RuntimeError: calibration file /data/cal.csv not found")
+
+
+def test_a_subsim_that_timed_out_is_killed_at_once_when_stopped(cosim_bus: Bus) -> None:
+    """Zenoh's own timeout (no deadline set) is a hang as a missed deadline is: stopping the process must not ask
+    it to shut down and wait out two graces (6 s per hung subsim at a test's teardown)."""
+    proc = cosim_bus.spawn("subsims.integrator", "stuck", timeout=1.0)
+    proc.handle.configure({"compute_delay": 30.0})
+    with pytest.raises(SubsimError) as err:
+        proc.handle.run_interval(TIMES, {"u": np.zeros((5, 1))})
+    assert err.value.code == "timeout" and str(err.value).endswith("no reply within 1 s (hung or stopped?)")
+    assert proc.handle.hung
+    assert proc.stop() == -signal.SIGKILL
