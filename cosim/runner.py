@@ -24,6 +24,7 @@ from cosim.launch import PRIVATE, UNSPECIFIED_HOSTS, Bus, Elsewhere, endpoint_fo
 from cosim.outputs import OutputError, reserve_output, resume_path
 from cosim.progress import Progress
 from cosim.protocol.security import Security
+from cosim.protocol.transport.client import NOT_APPEARED
 from cosim.protocol.transport.session import split_endpoint
 from cosim.results import ResultWriter, diag_path, output_units
 from cosim.resume import Saved, fingerprint, model_files
@@ -87,7 +88,14 @@ class Session:
             self.log(f"cosim: external subsim {name!r} must attach again; waiting up to {self.external_wait:g} s for "
                      "it (once the old process has exited: two copies answering as one stop the run)\n"
                      + attach_lines(self.bus, self.scenario, name, self.listen, first=False))
-            handle: SubsimHandle = self.bus.attach(name, timeout=self.timeout, wait=self.external_wait)
+            try:
+                handle: SubsimHandle = self.bus.attach(name, timeout=self.timeout, wait=self.external_wait)
+            except SubsimError as exc:  # not '--run and --name' of a first start: the same command, not started
+                if not exc.message.startswith(NOT_APPEARED):
+                    raise
+                raise SubsimError(exc.code, f"it did not attach again within {self.external_wait:g} s (its command "
+                                  "is above; --attach-wait sets how long it is waited for)", name,
+                                  exc.command) from None
         elif spec.launcher:
             handle = self._respawn_elsewhere(name)
         else:

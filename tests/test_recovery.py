@@ -415,3 +415,45 @@ def test_the_deadline_follows_measured_request_times() -> None:
     d.observe(3.0)  # one slow request: at once three times it
     assert d.seconds() == pytest.approx(9.0)
     assert Deadline(fixed=0.7).seconds() == 0.7
+
+
+@pytest.mark.slow
+def test_an_external_subsim_that_is_not_started_again_is_named_so(tmp_path: Path) -> None:
+    """Its process killed mid-run and nobody starting it again: the wait ran out with 'no process appeared ... check
+    its --run and --name' (a first start's advice, for the command that had worked); the line asking for it again
+    now repeats its command (multi-host probe)."""
+    scenario = Path(__file__).resolve().parents[1] / "scenarios" / "oscillator.toml"
+    external = tmp_path / "ext.toml"
+    external.write_text(scenario.read_text().replace(
+        '[subsims.mass2]\nmodel = "subsims.oscillator.subsim:Mass"',
+        '[subsims.mass2]\nexternal = true\nmodel = "subsims.oscillator.subsim:Mass"'))
+    coord = subprocess.Popen([sys.executable, "-m", "cosim.cli", "run", str(external), "--stop", "30", "--quiet",
+                              "--attach-wait", "2", "--restarts", "1", "--output", str(tmp_path / "ext.csv")],
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    user = None
+    try:
+        assert coord.stderr is not None
+        env, command = dict(os.environ), None
+        for line in coord.stderr:
+            words = line.split()
+            if "cosim.serve" in words:
+                at = words.index("python")
+                env.update(w.split("=", 1) for w in words[:at])
+                command = [sys.executable, *words[at + 1:]]
+                break
+        assert command is not None
+        user = subprocess.Popen(command, stderr=subprocess.DEVNULL, env=env)
+        time.sleep(2.0)  # mid-run
+        user.kill()
+        user.wait()
+        _, err = coord.communicate(timeout=120)
+    finally:
+        for p in [coord, *([user] if user else [])]:
+            if p.poll() is None:
+                p.kill()
+            p.wait()
+    assert coord.returncode == 1, err
+    again = err.index("cosim: external subsim 'mass2' must attach again")
+    assert "python -m cosim.serve subsims.oscillator.subsim:Mass" in err[again:]  # its command, once more
+    assert ("run stopped: mass2.connect: [no_responder] it did not attach again within 2 s (its command is above; "
+            "--attach-wait sets how long it is waited for)") in err.strip().splitlines()[-1], err

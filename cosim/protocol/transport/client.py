@@ -23,6 +23,7 @@ LEFT_AFTER = 0.8  # a death after a pause of this part of the subsim's lease or 
 PAUSE_REMEMBERED = 30.0  # s: a pause that ended longer before a death was found explains none
 DIED_MID_REQUEST = "the process died during the request"
 GONE = "the subsim process is gone"
+NOT_APPEARED = "no process appeared within"  # (a wait for a subsim's token ran out)
 SILENT_LIMIT = 15.0  # seconds a serving process (its token there, past a cut link's 10 s lease) may leave us unanswered
 # Every queryable on a subsim's key gets its requests (not only the best match): another login holder's queryable
 # declared there as complete would otherwise take them all and black-hole the subsim (its replies are forged anyway).
@@ -225,7 +226,7 @@ class RemoteHandle(SubsimHandle):
         while True:
             if not self._alive.is_set():  # not yet there, or gone again (a cut link outlived its lease)
                 if not self.wait_alive(max(deadline - time.monotonic(), 0.0)):
-                    raise SubsimError("no_responder", f"no process appeared within {timeout:g} s (none serves run "
+                    raise SubsimError("no_responder", f"{NOT_APPEARED} {timeout:g} s (none serves run "
                                                       f"{self.run!r} as {self.name!r}: check its --run and --name)",
                                       self.name, "connect")
                 silent_since = time.monotonic()
