@@ -124,6 +124,7 @@ class SubsimHandle:
         naming what it got wrong (a missing output reached the results writer as a KeyError)."""
         outputs, described = r["outputs"], self.outputs
         assert described is not None
+        times = np.ascontiguousarray(times, dtype=np.float64)  # as it went on the wire (a caller may give ints)
         if outputs.keys() != described.keys():
             missing, unknown = sorted(described.keys() - outputs.keys()), sorted(outputs.keys() - described.keys())
             parts = [f"missing output(s) {missing}"] if missing else []

@@ -233,3 +233,10 @@ def test_a_process_started_again_under_the_name_of_one_that_died_is_a_death_not_
         with pytest.raises(SubsimDied) as info:
             handle.run_interval(TIMES, INPUTS)
     assert "its process died, and the process now serving its name was started since" in str(info.value)
+
+
+def test_times_given_as_integers_are_checked_as_the_floats_they_travel_as(doctored) -> None:
+    handle = doctored(on_run(lambda r: None))
+    handle.configure({"size": 2})
+    result = handle.run_interval([0, 1, 2], {"u": np.ones((3, 2))})
+    np.testing.assert_array_equal(result.t, [0.0, 1.0, 2.0])
