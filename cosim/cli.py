@@ -7,7 +7,7 @@ import os
 import shlex
 import signal
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from cosim import __version__, interrupt
@@ -264,7 +264,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "subsims, tls/localhost:0 with --tls-cert; use tcp/0.0.0.0:7447 for other machines)")
     r.add_argument("--run-id", type=_run_id, help="run id that namespaces every key (default: a fresh one)")
     r.add_argument("--attach-wait", type=float, default=300.0, metavar="S",
-                   help="seconds to wait for each external subsim (default: 300)")
+                   help="seconds to wait for the external subsims, all started at once (default: 300)")
     r.add_argument("--quiet", action="store_true",
                    help="no progress display, and the subsims started do not announce themselves")
     r.add_argument("--restarts", type=int, metavar="N",
@@ -311,11 +311,15 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def main(argv: Sequence[str] | None = None) -> int:
+def main(argv: Sequence[str] | None = None, parsed: Callable[[], None] | None = None) -> int:
+    """``parsed``: called once the arguments are read, before the command does anything (``cosim.command`` hands
+    the signals back to Python's defaults there)."""
     parser = build_parser()
     args, extra = parser.parse_known_args(argv)
     if extra:
         args.parser.error(f"unrecognized arguments: {' '.join(extra)}")
+    if parsed is not None:
+        parsed()
     try:
         status = args.fn(args)
         sys.stdout.flush()  # a closed pipe shows here, not at exit
@@ -352,10 +356,10 @@ def _say_stopped(exc: Exception) -> None:
         say(f"cosim: {note}")
 
 
-def entry() -> int:
+def entry(parsed: Callable[[], None] | None = None) -> int:
     """The ``cosim`` command: :func:`main`, then nothing a signal could change about the exit status (a SIGTERM
     in the last milliseconds of a finished run killed it, rc -15, its files whole)."""
-    status = main()
+    status = main(parsed=parsed)
     for s in interrupt.SIGNALS:
         signal.signal(s, signal.SIG_IGN)
     return status

@@ -1,21 +1,23 @@
 """The ``cosim`` command's entry point: Ctrl-C is answered before the command's modules are loaded.
 
 Loading :mod:`cosim.cli` (NumPy, Zenoh, the coordinator) takes about 0.2 s; a SIGINT or SIGTERM then used to
-end in Python's traceback of whatever import it fell into. Until :func:`cosim.cli.entry` runs, one ends the
-command quietly with the shell's status for it (128 + the signal), as the command itself does later."""
+end in Python's traceback of whatever import it fell into. Until the command has read its arguments, one ends it
+quietly with the shell's status for it (128 + the signal), as the command itself does later. (Python's own start,
+before this module runs, is not covered.)"""
 
 from __future__ import annotations
 
 import os
 import signal
-import sys
 
 _EARLY = (signal.SIGINT, signal.SIGTERM)
 
 
 def _quit(signum: int, _frame: object) -> None:
-    sys.stderr.write(f"cosim: {signal.Signals(signum).name} while starting; nothing was run\n")
-    sys.stderr.flush()
+    try:
+        os.write(2, f"cosim: {signal.Signals(signum).name} while starting; nothing was run\n".encode())
+    except OSError:  # no stderr to say it on
+        pass
     os._exit(128 + signum)  # no clean-up to do yet, and none of the half-imported modules' exit hooks
 
 
@@ -24,9 +26,11 @@ def main() -> int:
     before = {s: signal.signal(s, _quit) for s in _EARLY if signal.getsignal(s) is not signal.SIG_IGN}
     from cosim.cli import entry  # the slow part
 
-    for s, handler in before.items():
-        signal.signal(s, handler)
-    return entry()
+    def parsed() -> None:  # from here on the command starts things (processes, files) and stops them itself
+        for s, handler in before.items():
+            signal.signal(s, handler)
+
+    return entry(parsed)
 
 
 if __name__ == "__main__":

@@ -7,9 +7,12 @@ A run (or a subsim serving it) must not die of that, so from then on nothing mor
 from __future__ import annotations
 
 import io
+import math
 import os
+import select
 import sys
 import threading
+import time
 
 
 def say(line: str) -> None:
@@ -61,15 +64,17 @@ def prefixed_stream(fd: int, prefix: str) -> io.TextIOWrapper:
 
 
 class StderrRelay:
-    """A child process's stderr, copied to this process's as it comes (a thread blocked in ``read``), with its last
+    """A child process's stderr, copied to this process's as it comes (a thread waiting on the pipe), with its last
     bytes kept: the line a process that failed to start left there (a model's ``__init__`` raising, a syntax error
     in a package's ``__main__``) belongs in the error that says it exited, not only on a terminal."""
 
     KEPT = 4096  # bytes of the end kept
+    RECENT = 2.0  # s: what it wrote longer before its end was noticed is not why it ended (a silent os._exit)
 
     def __init__(self, pipe: io.BufferedReader | None) -> None:
         self._tail = b""
-        self._fd = None if pipe is None else pipe.fileno()
+        self._written = -math.inf  # when it last wrote (monotonic)
+        self._abandoned = False
         self._thread = None
         if pipe is not None:
             self._pipe = pipe
@@ -77,15 +82,19 @@ class StderrRelay:
             self._thread.start()
 
     def _copy(self) -> None:
-        out = 2
-        while True:
+        fd, out = self._pipe.fileno(), _stderr_fd()
+        poller = select.poll()
+        poller.register(fd, select.POLLIN)
+        while not self._abandoned:
+            if not poller.poll(250):  # (woken 4 times a second to see whether it was given up)
+                continue
             try:
-                data = os.read(self._fd, 65536)  # type: ignore[arg-type]
+                data = os.read(fd, 65536)
             except OSError:
                 break
             if not data:
                 break
-            self._tail = (self._tail + data)[-self.KEPT:]
+            self._tail, self._written = (self._tail + data)[-self.KEPT:], time.monotonic()
             while data and out >= 0:
                 try:
                     data = data[os.write(out, data):]
@@ -94,12 +103,24 @@ class StderrRelay:
         self._pipe.close()
 
     def finish(self, timeout: float = 1.0) -> None:
-        """Wait (up to ``timeout`` s) until everything the child wrote is copied: its stderr closed, as at its end."""
+        """Wait (up to ``timeout`` s) until everything the child wrote is copied, as at its end; then give the pipe
+        up (a process it left behind, holding its stderr, would keep the thread and the pipe for its lifetime)."""
         if self._thread is not None:
             self._thread.join(timeout)
+            self._abandoned = True
 
     def last_line(self, timeout: float = 0.5) -> str | None:
-        """The child's last non-blank line on stderr (at most 200 characters), once it is copied; None if none."""
+        """The child's last non-blank line on stderr (at most 200 characters) if it wrote it lately; else None."""
         self.finish(timeout)
+        if time.monotonic() - self._written > self.RECENT:
+            return None
         lines = [x.strip() for x in self._tail.decode(errors="replace").splitlines() if x.strip()]
         return None if not lines else lines[-1][:200]
+
+
+def _stderr_fd() -> int:
+    """This process's stderr, or -1 if it started without one (descriptor 2 may be another file of ours now)."""
+    try:
+        return sys.__stderr__.fileno() if sys.__stderr__ is not None else -1
+    except (OSError, ValueError):
+        return -1

@@ -9,6 +9,7 @@ which decide between two scenarios' modules of the same name in one interpreter 
 
 from __future__ import annotations
 
+import ast
 import importlib
 import importlib.machinery
 import importlib.util
@@ -114,7 +115,7 @@ def load_model(path: str, search_path: Sequence[str] = ()) -> type[Subsim]:
     """The :class:`cosim.Subsim` subclass at ``package.module:Class``; ValueError naming the path otherwise.
     ``search_path``: as for :func:`import_object`."""
     if ":" not in str(path):  # e.g. the package name ``spawn_subsim`` or ``python -m`` takes
-        found = _models_in(str(path), search_path)
+        found = _models_in(str(path))
         hint = f" (did you mean {' or '.join(repr(f) for f in found)}?)" if found else ""
         raise ValueError(f"model {path!r} must be 'package.module:Class'{hint}")
     cls = import_object(path, "model", search_path)
@@ -123,16 +124,20 @@ def load_model(path: str, search_path: Sequence[str] = ()) -> type[Subsim]:
     return cls
 
 
-def _models_in(module_name: str, search_path: Sequence[str]) -> list[str]:
-    """``module:Class`` of the Subsim subclasses a module, or its ``subsim`` module, defines (for a hint only:
-    whatever fails to import here has none)."""
+def _models_in(module_name: str) -> list[str]:
+    """``module:Class`` of the classes a module, or its package's ``subsim`` module, defines on a base named
+    ``Subsim``, read from their source (for a hint only: nothing is imported or run)."""
     found = []
     for name in (module_name, f"{module_name}.subsim"):
         try:
-            _take_own(name.partition(".")[0], search_path)
-            module = importlib.import_module(name)
-        except Exception:
+            spec = importlib.util.find_spec(name)  # (for a dotted name, Python imports its parent package)
+            if spec is None or spec.origin is None or not spec.origin.endswith(".py"):
+                continue
+            tree = ast.parse(Path(spec.origin).read_text(encoding="utf-8"))
+        except (Exception, SystemExit):
             continue
-        found += [f"{name}:{k}" for k, v in vars(module).items()
-                  if isinstance(v, type) and issubclass(v, Subsim) and v.__module__ == name]
+        found += [f"{name}:{node.name}" for node in tree.body if isinstance(node, ast.ClassDef)
+                  and any(getattr(b, "id", getattr(b, "attr", None)) == "Subsim" for b in node.bases)]
+        if spec.submodule_search_locations is None:  # a module, not a package: no subsim module in it
+            break
     return found

@@ -89,13 +89,15 @@ class Session:
                      "it (once the old process has exited: two copies answering as one stop the run)\n"
                      + attach_lines(self.bus, self.scenario, name, self.listen, first=False))
             try:
-                handle: SubsimHandle = self.bus.attach(name, timeout=self.timeout, wait=self.external_wait)
+                attached = self.bus.attach(name, timeout=self.timeout, wait=self.external_wait)
+                attached.lease = self.scenario.run.lease
             except SubsimError as exc:  # not '--run and --name' of a first start: the same command, not started
                 if not exc.message.startswith(NOT_APPEARED):
                     raise
                 raise SubsimError(exc.code, f"it did not attach again within {self.external_wait:g} s (its command "
                                   "is above; --attach-wait sets how long it is waited for)", name,
                                   exc.command) from None
+            handle: SubsimHandle = attached
         elif spec.launcher:
             handle = self._respawn_elsewhere(name)
         else:
@@ -191,9 +193,18 @@ def open_session(
                                         elsewhere=away.get(name))
                     handles[name] = process.handle
             waited_until = time.monotonic() + external_wait
-            for name in external:  # one wait for all of them (a floor each, for the attach itself)
+            for name in external:  # one wait for all of them (a floor each: to attach one that is up already)
                 wait = max(waited_until - time.monotonic(), min(ATTACH_FLOOR, external_wait))
-                handles[name] = bus.attach(name, timeout=timeout, wait=wait)
+                try:
+                    attached = bus.attach(name, timeout=timeout, wait=wait)
+                except SubsimError as exc:  # said with the wait the user set, not this one's share of it
+                    if not exc.message.startswith(NOT_APPEARED):
+                        raise
+                    raise SubsimError(exc.code, f"{NOT_APPEARED} {external_wait:g} s (--attach-wait; none serves "
+                                      f"run {bus.run!r} as {name!r}: check its --run and --name)", name,
+                                      exc.command) from None
+                attached.lease = scenario.run.lease  # (its command above carries it)
+                handles[name] = attached
         for name, spec in scenario.subsims.items():
             try:
                 session.descriptions[name] = handles[name].configure(spec.params, t0=scenario.start)
@@ -216,7 +227,7 @@ def open_session(
 
 
 PARAMS_REFUSED = frozenset({"bad_value", "model_error", "model_exception"})  # configure's errors about its params
-ATTACH_FLOOR = 10.0  # s each external subsim is waited for at least, once the run's wait for them all is over
+ATTACH_FLOOR = 2.0  # s each external subsim is waited for at least, once the run's wait for them all is over
 RETRY_ELSEWHERE = 5.0  # s between tries to start a lost subsim on another machine again
 AWAY_FLOOR = 10.0  # s: the shortest automatic deadline when a subsim is on another machine (a Zenoh lease: a
 # network blip shorter than that is waited out, not taken for a hang that costs a restart)

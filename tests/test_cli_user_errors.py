@@ -37,6 +37,9 @@ COSIM = [sys.executable, "-m", "cosim.cli"]
     # a package where a class is needed (as spawn_subsim and python -m take it): the class it holds is named
     ('model = "subsims.oscillator.subsim:Mass"', 'model = "subsims.oscillator"',
      ["[subsims.mass1.model]", "must be 'package.module:Class' (did you mean 'subsims.oscillator.subsim:Mass'?)"]),
+    # the hint reads the module's source: a __main__ named there is not run (it printed its usage and exited 2)
+    ('model = "subsims.oscillator.subsim:Mass"', 'model = "subsims.oscillator.__main__"',
+     ["[subsims.mass1.model]", "model 'subsims.oscillator.__main__' must be 'package.module:Class'"]),
     ('model = "subsims.oscillator.subsim:Mass"', 'model = "subsims.no_such_package"',
      ["[subsims.mass1.model]", "model 'subsims.no_such_package' must be 'package.module:Class'"]),
     # a misspelled table name that breaks the TOML itself

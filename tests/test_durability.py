@@ -677,35 +677,58 @@ def test_a_signal_after_the_command_is_done_does_not_change_its_exit_status(tmp_
     assert done.returncode == 0 and done.stdout.splitlines()[-1] == "exiting with 0", (done.returncode, done.stderr)
 
 
-# sends the signal to itself as the command starts loading cosim.cli (its ~0.2 s of imports), then runs the command
-_SIGNAL_WHILE_LOADING = """import importlib.abc, os, signal, sys
+# sends the signal to itself as the command starts loading cosim.cli (its ~0.2 s of imports), or as it builds
+# its argument parser, then runs the command
+_SIGNAL_WHILE_STARTING = """import importlib.abc, os, signal, sys
 class Hook(importlib.abc.MetaPathFinder):
     def find_spec(self, name, path, target=None):
         if name == "cosim.cli":
             os.kill(os.getpid(), signal.{signal})
 if {ignored}:
     signal.signal(signal.{signal}, signal.SIG_IGN)
-sys.meta_path.insert(0, Hook())
+if "{when}" == "loading":
+    sys.meta_path.insert(0, Hook())
+else:
+    import cosim.cli
+    build = cosim.cli.build_parser
+    def build_parser():
+        os.kill(os.getpid(), signal.{signal})
+        return build()
+    cosim.cli.build_parser = build_parser
 import cosim.command
 sys.argv = ["cosim", "--version"]
 sys.exit(cosim.command.main())
 """
 
 
+@pytest.mark.parametrize("when", ["loading", "parsing"])
 @pytest.mark.parametrize("name", ["SIGINT", "SIGTERM"])
-def test_a_signal_while_the_command_loads_ends_it_in_one_line(name: str) -> None:
+def test_a_signal_while_the_command_starts_ends_it_in_one_line(name: str, when: str) -> None:
     """Ctrl-C in the first 0.2 s of `cosim` printed a KeyboardInterrupt traceback through importlib (a SIGTERM
-    killed it, rc -15): one line and 128 + the signal."""
-    script = _SIGNAL_WHILE_LOADING.format(signal=name, ignored=False)
+    killed it, rc -15): one line and 128 + the signal, until the command has read its arguments."""
+    script = _SIGNAL_WHILE_STARTING.format(signal=name, ignored=False, when=when)
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60, env=ENV)
     number = getattr(signal, name)
     assert (done.returncode, done.stdout) == (128 + number, ""), (done.returncode, done.stdout, done.stderr)
     assert done.stderr == f"cosim: {name} while starting; nothing was run\n"
 
 
+def test_a_signal_while_the_command_loads_with_its_stderr_gone_still_ends_it_so() -> None:
+    """Its line cannot be written (the reader of stderr went away): the exit status is still 143, not 1."""
+    read, write = os.pipe()
+    os.close(read)
+    try:
+        done = subprocess.run([sys.executable, "-c", _SIGNAL_WHILE_STARTING.format(
+            signal="SIGTERM", ignored=False, when="loading")], stdout=subprocess.PIPE, stderr=write, timeout=60,
+            env=ENV)
+    finally:
+        os.close(write)
+    assert done.returncode == 128 + signal.SIGTERM
+
+
 def test_a_signal_the_parent_ignored_stays_ignored_while_the_command_loads() -> None:
     """A background job's SIGINT is ignored from the start: the command must not start answering it."""
-    script = _SIGNAL_WHILE_LOADING.format(signal="SIGINT", ignored=True)
+    script = _SIGNAL_WHILE_STARTING.format(signal="SIGINT", ignored=True, when="loading")
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60, env=ENV)
     assert (done.returncode, done.stdout.strip()) == (0, f"cosim {__version__}"), done.stderr
 

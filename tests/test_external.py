@@ -143,3 +143,4 @@ def test_every_external_subsims_command_comes_before_the_wait_and_carries_the_ru
     assert done.stderr.index("cosim-attach ") < done.stderr.index("waiting up to 1 s for external subsims 'mass1', "
                                                                    "'mass2'")
     assert done.stderr.rindex("cosim-attach ") < done.stderr.index("waiting up to")
+    assert "mass1.connect: [no_responder] no process appeared within 1 s (--attach-wait; " in done.stderr

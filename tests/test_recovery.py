@@ -426,7 +426,7 @@ def test_an_external_subsim_that_is_not_started_again_is_named_so(tmp_path: Path
     external = tmp_path / "ext.toml"
     external.write_text(scenario.read_text().replace(
         '[subsims.mass2]\nmodel = "subsims.oscillator.subsim:Mass"',
-        '[subsims.mass2]\nexternal = true\nmodel = "subsims.oscillator.subsim:Mass"'))
+        '[subsims.mass2]\nexternal = true\nmodel = "subsims.oscillator.subsim:Mass"') + "\n[run]\nlease = 30\n")
     coord = subprocess.Popen([sys.executable, "-m", "cosim.cli", "run", str(external), "--stop", "30", "--quiet",
                               "--attach-wait", "2", "--restarts", "1", "--output", str(tmp_path / "ext.csv")],
                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -455,5 +455,6 @@ def test_an_external_subsim_that_is_not_started_again_is_named_so(tmp_path: Path
     assert coord.returncode == 1, err
     again = err.index("cosim: external subsim 'mass2' must attach again")
     assert "python -m cosim.serve subsims.oscillator.subsim:Mass" in err[again:]  # its command, once more
+    assert "silent for longer than its 30 s lease" in err  # the lease its command was given, not 10 s
     assert ("run stopped: mass2.connect: [no_responder] it did not attach again within 2 s (its command is above; "
             "--attach-wait sets how long it is waited for)") in err, err
