@@ -68,6 +68,8 @@ def _changed_attributes(before: dict[str, Any], after: dict[str, Any]) -> list[s
 
 
 def _same(a: Any, b: Any) -> bool:
+    if a is b:  # (a NaN is not equal to itself; deep copies keep numbers as they are)
+        return True
     if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
         return isinstance(a, np.ndarray) and isinstance(b, np.ndarray) and a.shape == b.shape and \
             a.tobytes() == b.tobytes()
@@ -75,6 +77,8 @@ def _same(a: Any, b: Any) -> bool:
         return a.keys() == b.keys() and all(_same(a[k], b[k]) for k in a)
     if isinstance(a, (list, tuple)) and isinstance(b, (list, tuple)):
         return type(a) is type(b) and len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b))
+    if type(a) is type(b) and type(a).__eq__ is object.__eq__:  # a deep copy is another object: compare insides
+        return _same(vars(a), vars(b)) if hasattr(a, "__dict__") and hasattr(b, "__dict__") else True
     try:
         return bool(a == b)
     except Exception:  # objects without a usable equality: compare what they hold

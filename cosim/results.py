@@ -454,11 +454,12 @@ def _diag_rows_to(path: Path, t: float) -> tuple[int, int]:
             break
         if int(number) != keep + 1:
             raise OutputError(f"{path}: interval {keep + 1} is missing (the file was cut or edited): run it again "
-                              "from the start")
+                              "from the start (--overwrite instead of --resume)")
         keep, size, end = keep + 1, size + len(line), float(t1)
     if end != t:
-        raise OutputError(f"{path} does not reach the resume point t = {t!r} (it ends at "
-                          f"{'no interval' if end is None else f't = {end!r}'}): run it again from the start")
+        ends = "no interval" if end is None else f"t = {end!r}"
+        raise OutputError(f"{path} does not reach the resume point t = {t!r} (it ends at {ends}): run it again from "
+                          "the start (--overwrite instead of --resume)")
     return keep, size
 
 

@@ -36,6 +36,20 @@ def fingerprint(raw: Mapping[str, Any], method: str) -> str:
     return hashlib.sha256(text.encode()).hexdigest()
 
 
+def fingerprinted(raw: Mapping[str, Any], method: str) -> dict[str, Any]:
+    """What :func:`fingerprint` hashes, as JSON has it: saved with a resume point to say what changed since."""
+    tables = _numbers_as_floats({k: v for k, v in raw.items() if k not in IRRELEVANT})
+    return json.loads(json.dumps({**tables, "method": method}, sort_keys=True, default=repr))
+
+
+def changes(old: Any, new: Any, where: str = "") -> list[str]:
+    """The keys whose values differ between two fingerprinted scenarios, ``key: old -> new``."""
+    if isinstance(old, dict) and isinstance(new, dict):
+        return [c for k in sorted(old.keys() | new.keys(), key=str)
+                for c in changes(old.get(k, "(none)"), new.get(k, "(none)"), f"{where}.{k}" if where else k)]
+    return [] if old == new else [f"{where}: {json.dumps(old)} -> {json.dumps(new)}"]
+
+
 def _numbers_as_floats(v: Any) -> Any:
     """``u0 = 0`` and ``u0 = 0.0`` are the same scenario."""
     if isinstance(v, Mapping):
@@ -56,6 +70,7 @@ class Saved:
     states: dict[str, SubsimState]
     written: Mapping[str, Any] | None = None  # the results files' bytes and SHA-256 up to the point (ResultWriter)
     models: Mapping[str, str] | None = None  # SHA-256 of each file the subsims' parameters name (an FMU), by path
+    scenario: Mapping[str, Any] | None = None  # what was fingerprinted (:func:`fingerprinted`), to say what changed
 
 
 def save(path: Path, saved: Saved) -> None:
@@ -70,7 +85,7 @@ def save(path: Path, saved: Saved) -> None:
     meta = {"format": FORMAT, "fingerprint": saved.fingerprint, "t_start": saved.t_start, "t": saved.point.t,
             "length": saved.point.length,
             "subsims": {name: {"time": st.time, "model": st.model} for name, st in saved.states.items()},
-            "written": saved.written, "models": saved.models}
+            "written": saved.written, "models": saved.models, "scenario": saved.scenario}
     arrays["meta"] = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
 
     def write(f: io.BufferedIOBase) -> None:
@@ -83,7 +98,8 @@ def load(path: Path) -> Saved:
     """The resume point in ``path``; OutputError in one line when there is none or it is not one."""
     if not path.is_file():
         raise OutputError(f"no resume point {path}: the run stopped before its first checkpoint, or ended (a "
-                          "finished run removes it); run it again from the start")
+                          "finished run removes it); run it again from the start (--overwrite instead of "
+                          "--resume)")
     try:
         with np.load(path, allow_pickle=False) as z:
             meta = json.loads(bytes(z["meta"]).decode())
@@ -99,7 +115,8 @@ def load(path: Path) -> Saved:
         raise OutputError(f"{path} is damaged or not a resume point ({type(exc).__name__}: {why}): run it again "
                           "from the start with --overwrite") from None
     point = ResumePoint(float(meta["t"]), meta["length"], previous, magnitudes)
-    return Saved(meta["fingerprint"], float(meta["t_start"]), point, states, meta.get("written"), meta.get("models"))
+    return Saved(meta["fingerprint"], float(meta["t_start"]), point, states, meta.get("written"), meta.get("models"),
+                 meta.get("scenario"))
 
 
 def model_files(params: Mapping[str, Mapping[str, Any]]) -> dict[str, str]:

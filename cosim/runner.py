@@ -27,7 +27,7 @@ from cosim.protocol.security import Security
 from cosim.protocol.transport.client import NOT_APPEARED
 from cosim.protocol.transport.session import split_endpoint
 from cosim.results import ResultWriter, diag_path, output_units
-from cosim.resume import Saved, fingerprint, model_files
+from cosim.resume import Saved, changes, fingerprint, fingerprinted, model_files
 from cosim.resume import load as load_resume
 from cosim.resume import save as save_resume
 from cosim.scenario import RunSpec, Scenario, ScenarioError, SubsimSpec
@@ -276,9 +276,12 @@ def _resume_point(scenario: Scenario, method: str, key: str, output: Path, stop:
     """The resume point beside ``output``, if it is one of this scenario (``key``: its fingerprint) and method."""
     saved = load_resume(resume_path(output))
     if saved.fingerprint != key or saved.t_start != scenario.start:
+        changed = [] if saved.scenario is None else changes(saved.scenario, fingerprinted(scenario.raw, method))
+        shown = "; ".join(changed[:3]) + ("; ..." if len(changed) > 3 else "")
         raise OutputError(f"{resume_path(output)} is a resume point of another scenario or method than "
-                          f"{scenario.path} with method {method} (they must be the same but for stop): run it from "
-                          "the start (--overwrite; cosim.run without resume)")
+                          f"{scenario.path} with method {method} (they must be the same but for stop"
+                          + (f"; changed: {shown}" if shown else "") + "): run it from the start (--overwrite; "
+                          "cosim.run without resume)")
     if saved.point.t >= stop:
         raise OutputError(f"{output}: the run it continues got to t = {saved.point.t:g}, at or past stop = {stop:g}: "
                           "nothing to resume")
@@ -388,6 +391,7 @@ def run_scenario(
     output = Path(output) if output is not None else default_output(scenario, method)
     lock = reserve_output(output, overwrite or resume) if record else None  # locked before anything is launched
     key = fingerprint(scenario.raw, method)  # what a resume point of this run is saved under
+    tables = fingerprinted(scenario.raw, method)
     models = model_files({name: spec.params for name, spec in scenario.subsims.items()}) if record else {}
     try:
         saved = _resume_point(scenario, method, key, output, stop) if resume else None
@@ -419,7 +423,7 @@ def run_scenario(
         coordinator = Coordinator(session.handles, session.plans[method], settings, recovery=recovery,
                                   deadline=deadline, checkpoint_every=spec.checkpoint_every,
                                   on_checkpoint=None if lock is None else lambda point, states: checkpoints.append(
-                                      Saved(key, scenario.start, point, states)))
+                                      Saved(key, scenario.start, point, states, scenario=tables)))
         writer: ResultWriter | Unrecorded = Unrecorded() if lock is None else ResultWriter(
             output, output_signals(scenario, session.descriptions), output_units(session.descriptions), lock=lock,
             resume_at=None if saved is None else saved.point.t, written=None if saved is None else saved.written)

@@ -53,28 +53,74 @@ ATTRIBUTES_WATCHED = 3  # run_intervals after a configure whose model attributes
 VALUES = (bool, int, float, complex, str, bytes, tuple, frozenset, type(None))  # compared by value
 
 
-def _attribute_marks(model: object) -> dict[str, Any]:
-    """What tells an attribute changed: a value's value, an array's bytes, any other object itself (cheap, and
-    shallow: a list appended to in place goes unseen; ``cosim.check_pure`` compares deep copies)."""
-    return {k: (np.ndarray, v.tobytes()) if isinstance(v, np.ndarray) else v for k, v in vars(model).items()}
+def attribute_marks(model: object) -> dict[str, Any]:
+    """What tells a model's attribute changed (:func:`_mark` of each); :func:`changed_attributes` compares two."""
+    budget = _Budget()
+    return {k: _mark(v, budget, set()) for k, v in vars(model).items()}
+
+
+class _Budget:
+    """How much of a model's attributes is looked into: past it, a container or object is marked as itself."""
+
+    __slots__ = ("items", "nbytes")
+
+    def __init__(self) -> None:
+        self.items, self.nbytes = 100_000, 64 << 20
+
+    def take(self, items: int = 0, nbytes: int = 0) -> bool:
+        if items > self.items or nbytes > self.nbytes:
+            return False
+        self.items, self.nbytes = self.items - items, self.nbytes - nbytes
+        return True
+
+
+class _Ref:
+    """An object marked as itself: the same only if it is that object."""
+
+    __slots__ = ("obj",)
+
+    def __init__(self, obj: Any) -> None:
+        self.obj = obj
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, _Ref) and other.obj is self.obj
+
+    __hash__ = None  # type: ignore[assignment]
+
+
+def _mark(v: Any, budget: _Budget, seen: set[int]) -> Any:
+    """A value as itself; an array by its bytes; a list, tuple, dict or set by its items' marks (so an item
+    appended or changed in place shows); any other object as itself (what it holds is not looked into: a helper
+    object of the model's, an FMU's instance, may change inside while ``advance`` is pure). Within ``budget``."""
+    if isinstance(v, np.ndarray):
+        return ("array", v.dtype.str, v.shape, v.tobytes()) if budget.take(nbytes=v.nbytes) else _Ref(v)
+    if isinstance(v, VALUES) and type(v) not in (tuple, frozenset):
+        return v
+    if id(v) in seen:  # a cycle
+        return _Ref(v)
+    seen = seen | {id(v)}
+    if type(v) in (list, tuple, dict, set, frozenset) and budget.take(items=len(v)):
+        if isinstance(v, dict):
+            return ("dict", [(_mark(k, budget, seen), _mark(x, budget, seen)) for k, x in v.items()])
+        if isinstance(v, (set, frozenset)):
+            return ("set", [_mark(x, budget, seen) for x in v])
+        return (type(v).__name__, [_mark(x, budget, seen) for x in v])
+    return v if isinstance(v, VALUES) else _Ref(v)
+
+
+def changed_attributes(before: Mapping[str, Any], after: Mapping[str, Any]) -> list[str]:
+    """The names of the attributes whose :func:`attribute_marks` differ (added and removed ones included)."""
+    return sorted(k for k in set(before) | set(after) if k not in before or k not in after or not _same(before[k],
+                                                                                                       after[k]))
 
 
 def _same(a: Any, b: Any) -> bool:
-    if a is b:
+    if a is b:  # (a NaN is not equal to itself)
         return True
-    if isinstance(a, tuple) and len(a) == 2 and a[0] is np.ndarray:  # an array's mark
-        return isinstance(b, tuple) and len(b) == 2 and b[0] is np.ndarray and a[1] == b[1]
-    if type(a) is not type(b) or not isinstance(a, VALUES):
-        return False
     try:
         return bool(a == b)
-    except Exception:  # a tuple holding arrays
+    except Exception:  # (an item's own __eq__ failing)
         return False
-
-
-def _changed_attributes(before: Mapping[str, Any], after: Mapping[str, Any]) -> list[str]:
-    return sorted(k for k in set(before) | set(after) if k not in before or k not in after or not _same(before[k],
-                                                                                                       after[k]))
 
 
 def _model_line(exc: BaseException) -> str:
@@ -244,7 +290,7 @@ class Runtime:
             raise CosimError("bad_value", f"interp: {exc}") from None
         u = self._input_function(times, inputs, interp)
         watched = self._attributes_watched > 0 and hasattr(self.model, "__dict__")
-        before = _attribute_marks(self.model) if watched else None
+        before = attribute_marks(self.model) if watched else None
         try:
             result = self.model.advance(state, times, u)
         except ModelError as exc:
@@ -253,7 +299,7 @@ class Runtime:
             raise _model_exception("advance", exc) from None
         if before is not None:
             self._attributes_watched -= 1
-            changed = _changed_attributes(before, _attribute_marks(self.model))
+            changed = changed_attributes(before, attribute_marks(self.model))
             if changed:  # what evolves there is not rolled back, and a repeated stage integrates it again
                 raise CosimError("model_error", f"advance() changed the model's attribute(s) {changed} (over t in "
                                  f"[{times[0]:g}, {times[-1]:g}]): what evolves belongs in the state vector, which "

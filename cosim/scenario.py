@@ -9,7 +9,6 @@ tested against it).
 
 from __future__ import annotations
 
-import difflib
 import os
 import tomllib
 from collections.abc import Mapping
@@ -27,7 +26,7 @@ from cosim.coupler.relaxation import METHODS, Settings
 from cosim.importing import add_search_path, load_model
 from cosim.protocol.keys import check_name
 from cosim.protocol.security import Security
-from cosim.subsim import Subsim
+from cosim.subsim import Subsim, closest
 
 
 @dataclass(frozen=True)
@@ -294,7 +293,7 @@ class _Parser:
     def known(self, table: Mapping, allowed: set[str], key: str) -> None:
         extra = sorted(set(table) - allowed)
         if extra:
-            close = {k: m[0] for k in extra if (m := difflib.get_close_matches(str(k), sorted(allowed), n=1))}
+            close = {k: m for k in extra if (m := closest(str(k), sorted(allowed)))}
             if len(extra) == 1 and close:
                 hint = f" (did you mean {close[extra[0]]!r}?)"
             else:

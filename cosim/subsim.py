@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import difflib
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -85,8 +85,8 @@ def resolve_params(declared: Mapping[str, Param], given: Mapping[str, Any]) -> d
     if unknown:
         hints = []
         for k in unknown:
-            close = difflib.get_close_matches(str(k), list(declared), n=1)
-            hints.append(f"{k!r} (did you mean {close[0]!r}?)" if close else repr(k))
+            close = closest(str(k), declared)
+            hints.append(f"{k!r} (did you mean {close!r}?)" if close else repr(k))
         raise ValueError(f"unknown parameter(s) {', '.join(hints)}; this model takes: {', '.join(declared)}")
     for k, v in given.items():  # a number in quotes would otherwise fail deep inside the model
         default = declared[k].default
@@ -157,3 +157,14 @@ class Subsim:
         arguments always give the same result, and ``state`` must not be modified in place.
         """
         raise NotImplementedError
+
+
+def closest(word: str, names: Iterable[str]) -> str | None:
+    """The name in ``names`` a misspelled ``word`` most likely meant: one that differs only in case first (``kd``
+    for ``Kd``, too short for a similarity), else the most similar, if similar enough; None if none is."""
+    names = [str(n) for n in names]
+    same = [n for n in names if n.lower() == word.lower()]
+    if same:
+        return same[0]
+    close = difflib.get_close_matches(word.lower(), [n.lower() for n in names], n=1)
+    return next(n for n in names if n.lower() == close[0]) if close else None

@@ -20,6 +20,9 @@ COSIM = [sys.executable, "-m", "cosim.cli"]
      ["[subsims.mass1.params]", "unknown parameter(s) 'mass'", "this model takes: m,"]),
     ("v0 = 0.0, idiv = 1 }\n\n[subsims.mass2]", "v0 = 0.0, idvi = 1 }\n\n[subsims.mass2]",
      ["[subsims.mass1.params]", "'idvi' (did you mean 'idiv'?)"]),
+    # a name that differs only in case is too short for a similarity: it is found all the same
+    ("params = { m = 1.0, k = 197.39208802178717, u0 = 1.0,", "params = { M = 1.0, k = 197.39208802178717, u0 = 1.0,",
+     ["[subsims.mass1.params]", "'M' (did you mean 'm'?)"]),
     # a number in quotes: refused by name, before it fails deep inside the model
     ("params = { m = 1.0, k = 197.39208802178717, u0 = 1.0,",
      'params = { m = "1.0", k = 197.39208802178717, u0 = 1.0,',

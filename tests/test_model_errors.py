@@ -196,15 +196,40 @@ class _Cached(Subsim):
         return {"x": np.full((times.size, 1), self.table[1])}, state
 
 
-@pytest.mark.parametrize("model", [_Drifting, _Lagging])
-def test_a_model_that_keeps_run_state_in_its_attributes_is_refused_by_name(model: type[Subsim]) -> None:
+class _Counting(_Cached):
+    """Counts its calls in a dict made in initial_state, changed in place (the newcomer probe's model, whose state
+    changed after 50 calls: the check compared the dict with itself)."""
+
+    def initial_state(self, params):
+        self.calls = {"n": 0}
+        return np.zeros(1)
+
+    def advance(self, state, times, u):
+        self.calls["n"] += 1
+        return super().advance(state, times, u)
+
+
+class _Appending(_Cached):
+    """Appends to a list inside a list it keeps."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.history = [[]]
+
+    def advance(self, state, times, u):
+        self.history[0].append(float(times[-1]))
+        return super().advance(state, times, u)
+
+
+@pytest.mark.parametrize(("model", "name"), [(_Drifting, "h"), (_Lagging, "last"), (_Counting, "calls"),
+                                             (_Appending, "history")])
+def test_a_model_that_keeps_run_state_in_its_attributes_is_refused_by_name(model: type[Subsim], name: str) -> None:
     h = InProcessHandle(model(), "m")
     h.configure({})
     t = np.linspace(0.0, 0.4, 3)
     with pytest.raises(SubsimError) as err:
         h.run_interval(t, {"u": np.zeros((3, 1))})
     assert err.value.code == "model_error", err.value
-    name = "h" if model is _Drifting else "last"
     assert f"advance() changed the model's attribute(s) ['{name}'] (over t in [0, 0.4]): what evolves belongs in the " \
            "state vector" in str(err.value)
     assert h.status()["time"] == 0.0  # nothing committed
@@ -223,7 +248,15 @@ class _Rebinding(_Cached):
         return super().advance(state, times, u)
 
 
-@pytest.mark.parametrize("model", [_Cached, _Rebinding])
+class _Holding(_Cached):
+    """Keeps containers it only reads, one holding a helper object and a NaN: pure, and not refused."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.parts = {"helper": object(), "limits": [float("nan"), 1.0], "table": np.arange(4.0)}
+
+
+@pytest.mark.parametrize("model", [_Cached, _Rebinding, _Holding])
 def test_a_model_that_only_reads_its_attributes_runs(model: type[Subsim]) -> None:
     check_pure(model(), {}, np.linspace(0.0, 0.4, 3), {"u": np.zeros((3, 1))})
     h = InProcessHandle(model(), "m")

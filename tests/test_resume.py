@@ -72,15 +72,17 @@ def test_a_resumed_run_writes_what_an_uninterrupted_one_does(tmp_path: Path, sce
 def test_a_resume_point_of_another_scenario_or_none_is_refused(tmp_path: Path) -> None:
     sc = every(OSCILLATOR, 10)
     out = tmp_path / "x.csv"
-    with pytest.raises(OutputError, match="no resume point"):
+    with pytest.raises(OutputError, match=r"no resume point .* from the start \(--overwrite instead of --resume\)"):
         run_scenario(sc, stop=2.0, output=out, inprocess=True, progress=False, resume=True)
     with pytest.raises(Stop):
         run_scenario(sc, stop=2.0, output=out, inprocess=True, progress=False, on_interval=stop_after(25))
     changed = parse({**sc.raw, "coupling": {**sc.raw["coupling"], "samples": 6}}, sc.path)
-    with pytest.raises(OutputError, match="a resume point of another scenario or method"):
+    with pytest.raises(OutputError, match="a resume point of another scenario or method") as err:
         run_scenario(changed, stop=2.0, output=out, inprocess=True, progress=False, resume=True)
-    with pytest.raises(OutputError, match="a resume point of another scenario or method"):
+    assert "(they must be the same but for stop; changed: coupling.samples: 5.0 -> 6.0)" in str(err.value)
+    with pytest.raises(OutputError, match="a resume point of another scenario or method") as err:
         run_scenario(sc, method="centralized", stop=2.0, output=out, inprocess=True, progress=False, resume=True)
+    assert 'changed: method: "distributed" -> "centralized")' in str(err.value)  # what changed, named
     with pytest.raises(OutputError, match="exists: continue that run with --resume"):
         run_scenario(sc, stop=2.0, output=out, inprocess=True, progress=False, overwrite=False)
     same = parse({**sc.raw, "subsims": {**sc.raw["subsims"], "mass2": {  # u0 = 0 for 0.0: the same scenario

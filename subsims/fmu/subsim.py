@@ -29,7 +29,6 @@ that cannot serialize its state is refused at ``configure`` (and at start-up whe
 from __future__ import annotations
 
 import copy
-import difflib
 import weakref
 from collections.abc import Mapping
 from pathlib import Path
@@ -38,7 +37,7 @@ from typing import Any
 import numpy as np
 from scipy.integrate import BDF, DOP853, LSODA, RK23, RK45, Radau
 
-from cosim.subsim import InputFunction, ModelError, Port, Subsim
+from cosim.subsim import InputFunction, ModelError, Port, Subsim, closest
 from subsims.fmu.fmu import FmiCallError, FmuError, FmuInfo, Instance, RealPorts, coerce, read_fmu
 
 SETTINGS = {"fmu", "interface", "substeps", "solver", "rtol", "atol", "max_step", "tolerance", "state_capacity",
@@ -227,8 +226,7 @@ class FmuSubsim(Subsim):
         unknown = sorted(k for k in given if k not in info.settable)
         if unknown:
             known = ", ".join(sorted(info.settable)) or "none"
-            close = [f"{k!r} for {match[0]!r}" for k in unknown
-                     if (match := difflib.get_close_matches(k, [*info.settable, *SETTINGS], n=1))]
+            close = [f"{k!r} for {match!r}" for k in unknown if (match := closest(k, [*info.settable, *SETTINGS]))]
             hint = f" (did you mean {', '.join(close)}?)" if close else ""
             raise ValueError(f"unknown FMU variable(s) {unknown} in {info.path.name}{hint}; settable: {known} "
                              f"(subsim settings: {', '.join(sorted(SETTINGS))})")
