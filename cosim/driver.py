@@ -314,6 +314,13 @@ class Coordinator:
                     reply = self._run(action)
                 except _Replaced:
                     retry = True
+                except SubsimError as exc:
+                    if action.stage > 0 and exc.code in ("model_error", "bad_value") and "finite" in exc.message:
+                        exc.add_note(f"it was at stage {action.stage} of the interval [{action.times[0]:g}, "
+                                     f"{action.times[-1]:g}], on inputs the coupling iteration made: if that iteration "
+                                     "diverged (values growing stage by stage), a shorter [coupling] interval is the "
+                                     "cure")
+                    raise
             elif isinstance(action, StageDone):
                 if self.on_stage is not None:
                     self.on_stage(action.stage, action.outputs)

@@ -293,3 +293,23 @@ def test_a_run_whose_stderr_reader_went_away_still_runs_to_the_end(tmp_path: Pat
     assert proc.returncode == 0, stdout
     assert "20 intervals to t = 1 " in stdout
     assert out.read_text().splitlines()[-1].startswith("1.0,")
+
+
+@pytest.mark.parametrize(("interval", "words"), [
+    ("5", "transform 'gain' produced NaN or inf (as a coupling iteration that diverges makes them: a shorter "
+          "[coupling] interval then)"),
+    ("20", "on inputs the coupling iteration made: if that iteration diverged (values growing stage by stage), a "
+           "shorter [coupling] interval is the cure"),
+])
+def test_an_interval_so_long_that_the_iteration_diverges_says_so(tmp_path: Path, interval: str, words: str) -> None:
+    """The oscillator at 5 s and 20 s intervals (its period is 0.4 s): the iteration overflows. It read as a bug in a
+    transform or a model ('output 'u' is not finite'), with nothing pointing at the interval (newcomer probe)."""
+    text = OSCILLATOR.read_text()
+    assert "\ninterval = " in text
+    sc = tmp_path / "long.toml"
+    sc.write_text("\n".join(f"interval = {interval}" if x.startswith("interval = ") else x
+                            for x in text.splitlines()))
+    done = subprocess.run([*COSIM, "run", str(sc), "--inprocess", "--quiet", "--stop", "120", "--output",
+                           str(tmp_path / "x.csv")], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 1 and words in done.stderr, done.stderr
+    assert "Traceback" not in done.stderr

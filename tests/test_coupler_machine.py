@@ -185,3 +185,11 @@ def test_not_converged_says_what_to_try_from_how_the_residuals_went() -> None:
     assert "more [coupling] max_stages" in stuck.splitlines()[-1]  # b.y still falls
     stuck = str(NotConverged(0.0, 0.4, 50, ["a.x"], {"a.x": [1e-3, 2e-3, 1.5e-3, 1.6e-3]}))
     assert stuck.splitlines()[-1].startswith("  to try: a shorter [coupling] interval")
+    assert "round-off" in stuck.splitlines()[-1]
+    # growing residuals (an interval too long for the coupling) were told to take more stages (newcomer probe), and
+    # a Jacobi iteration's every-other-stage residuals, growing, to mind the round-off
+    for growing in ([1e11, 5e11, 1e12, 3e12], [0.0, 4.8e5, 0.0, 6.0e5]):
+        last = str(NotConverged(0.0, 10.0, 4, ["a.x"], {"a.x": growing})).splitlines()[-1]
+        assert last.startswith("  to try: a shorter [coupling] interval") and "the iteration diverges" in last, last
+    halving = str(NotConverged(0.0, 10.0, 6, ["a.x"], {"a.x": [0.0, 6.0e5, 0.0, 2.0e5, 0.0, 5.0e4]}))
+    assert "more [coupling] max_stages (the residuals still fall)" in halving.splitlines()[-1]

@@ -11,8 +11,8 @@ import pytest
 
 from cosim.coupler.couplings import Coupling, CouplingError, check_couplings, check_units
 
-UNITS_IN = {"wheel": {"omega": "deg/s", "free": "", "phi": "rad"}}
-UNITS_OUT = {"att": {"omega": "rad/s", "phi": "rad", "raw": ""}}
+UNITS_IN = {"wheel": {"omega": "deg/s", "free": "", "phi": "rad", "torque": "N*m"}}
+UNITS_OUT = {"att": {"omega": "rad/s", "phi": "rad", "raw": "", "torque": "N m"}}
 
 
 @pytest.mark.parametrize(("source", "target", "refused"), [
@@ -20,6 +20,7 @@ UNITS_OUT = {"att": {"omega": "rad/s", "phi": "rad", "raw": ""}}
     ("att.phi", "wheel.phi", False),      # the same unit
     ("att.raw", "wheel.omega", False),    # a port without a unit says nothing to compare
     ("att.omega", "wheel.free", False),
+    ("att.torque", "wheel.torque", False),  # 'N m' is 'N*m' (it was refused, with a gain to convert: newcomer probe)
 ])
 def test_an_identity_coupling_joins_ports_of_one_unit(source: str, target: str, refused: bool) -> None:
     couplings = [Coupling.make("wheel.phi", "att.phi"), Coupling.make(target, source)]
@@ -30,8 +31,9 @@ def test_an_identity_coupling_joins_ports_of_one_unit(source: str, target: str, 
         check_units(couplings, UNITS_IN, UNITS_OUT)
     assert err.value.index == 1
     assert str(err.value) == ("coupling att.omega -> wheel.omega: units differ, the output is in 'rad/s' and the input "
-                              "takes 'deg/s': convert with a transform (transform = \"gain\", params = { k = ... }) or "
-                              "declare the ports in one unit")
+                              "takes 'deg/s': if it is one quantity in two units, convert with a transform (transform "
+                              "= \"gain\", params = { k = ... }) or declare the ports in one unit; if not, the coupling "
+                              "joins the wrong ports")
 
 
 def test_every_coupling_between_other_units_is_named_at_once() -> None:
@@ -40,7 +42,7 @@ def test_every_coupling_between_other_units_is_named_at_once() -> None:
     with pytest.raises(CouplingError) as err:
         check_units(couplings, UNITS_IN, UNITS_OUT)
     assert err.value.index == 0 and str(err.value).endswith(
-        "or declare the ports in one unit; also [couplings[3]] coupling att.omega -> wheel.phi: units differ, the "
+        "if not, the coupling joins the wrong ports; also [couplings[3]] coupling att.omega -> wheel.phi: units differ, the "
         "output is in 'rad/s' and the input takes 'rad'"), err.value
 
 

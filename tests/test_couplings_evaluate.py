@@ -32,7 +32,7 @@ def test_other_values_become_float64(y: object) -> None:
 def test_nan_or_inf_is_refused_naming_the_coupling(bad: float, where: int) -> None:
     y = np.ones((5, 3))
     y.flat[where] = bad
-    with pytest.raises(ValueError, match=r"^coupling a\.y -> b\.u: transform 'identity' produced NaN or inf$"):
+    with pytest.raises(ValueError, match=r"^coupling a\.y -> b\.u: transform 'identity' produced NaN or inf \(as a "):
         Coupling.make("b.u", "a.y").evaluate(_outputs(y), 3, 5)
 
 

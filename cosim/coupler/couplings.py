@@ -70,7 +70,8 @@ class Coupling:
             name = self.transform_name
             raise TransformError(f"coupling {self}: transform {name!r} gave shape {value.shape}, need ({n}, {size})")
         if np.count_nonzero(np.isfinite(value)) != value.size:  # not .all(): its Python wrapper costs more
-            raise TransformError(f"coupling {self}: transform {self.transform_name!r} produced NaN or inf")
+            raise TransformError(f"coupling {self}: transform {self.transform_name!r} produced NaN or inf (as a "
+                                 "coupling iteration that diverges makes them: a shorter [coupling] interval then)")
         return value
 
     def as_table(self) -> dict[str, Any]:
@@ -141,6 +142,7 @@ def _check_one(c: Coupling, inputs: Ports, outputs: Ports, driven: dict[SignalRe
 def check_units(couplings: Sequence[Coupling], inputs: Units, outputs: Units) -> None:
     """An identity coupling joins ports of the same unit where both declare one (a transform may convert, so its
     ports are not compared). Units are compared as written: 'rad/s' and 'deg/s' differ, so do 'm/s' and 'm s^-1'.
+    A product may be written with a space, '*', '.' or a middle dot ('N m' is 'N*m').
     Raises CouplingError naming the first such coupling, and the others after it (one run to see them all)."""
     bad = []
     for i, c in enumerate(couplings):
@@ -148,12 +150,18 @@ def check_units(couplings: Sequence[Coupling], inputs: Units, outputs: Units) ->
             continue
         src = outputs[c.sources[0].subsim][c.sources[0].port]
         dst = inputs[c.target.subsim][c.target.port]
-        if src and dst and src != dst:
+        if src and dst and _unit(src) != _unit(dst):
             bad.append((i, f"coupling {c}: units differ, the output is in {src!r} and the input takes {dst!r}"))
     if bad:
         others = "".join(f"; also [couplings[{i}]] {text}" for i, text in bad[1:])
-        raise CouplingError(bad[0][0], f"{bad[0][1]}: convert with a transform (transform = \"gain\", params = "
-                            f"{{ k = ... }}) or declare the ports in one unit{others}")
+        raise CouplingError(bad[0][0], f"{bad[0][1]}: if it is one quantity in two units, convert with a transform "
+                            f"(transform = \"gain\", params = {{ k = ... }}) or declare the ports in one unit; if "
+                            f"not, the coupling joins the wrong ports{others}")
+
+
+def _unit(text: str) -> str:
+    """A unit as compared: the product signs written alike."""
+    return " ".join(text.replace("*", " ").replace("\u00b7", " ").replace(".", " ").split())
 
 
 def _try_transform(c: Coupling, inputs: Ports, outputs: Ports) -> None:

@@ -179,13 +179,25 @@ class NotConverged(RuntimeError):
             hist = ", ".join(f"{r:.3e}" for r in residuals[name][-8:])
             lines.append(f"  {name}: residual by stage (last 8) [{hist}]")
         shorter = "a shorter [coupling] interval (max_halvings > 0 halves it only where needed)"
-        series = [residuals[n] for n in failing]
-        if any(len(r) < 2 or r[-1] < r[-2] for r in series):  # still falling, or too few stages to tell
+        trends = {_trend(residuals[n]) for n in failing}
+        if "growing" in trends:
+            lines.append(f"  to try: {shorter}: the iteration diverges (the residuals grow), the coupling too strong "
+                         "for an interval this long")
+        elif "falling" in trends:
             lines.append(f"  to try: more [coupling] max_stages (the residuals still fall), or {shorter}")
         else:
             lines.append(f"  to try: {shorter}, or tolerances no tighter than the models' round-off")
         super().__init__("\n".join(lines))
         self.t0, self.t1, self.stages, self.failing, self.residuals = t0, t1, stages, failing, residuals
+
+
+def _trend(r: Sequence[float]) -> str:
+    """How a signal's residuals go over the last stages: "growing", "falling" (by half at least) or "stalled". Over
+    pairs of stages: a Jacobi iteration of two subsims changes each signal every other stage (0, 6e5, 0, 4.8e5)."""
+    if len(r) < 3:
+        return "falling"  # too few stages to tell
+    recent, before = max(r[-2:]), max(r[-4:-2])
+    return "growing" if recent > before else "falling" if recent <= 0.5 * before else "stalled"
 
 
 class RetryInterval(Exception):
