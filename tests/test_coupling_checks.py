@@ -31,9 +31,9 @@ def test_an_identity_coupling_joins_ports_of_one_unit(source: str, target: str, 
         check_units(couplings, UNITS_IN, UNITS_OUT)
     assert err.value.index == 1
     assert str(err.value) == ("coupling att.omega -> wheel.omega: units differ, the output is in 'rad/s' and the input "
-                              "takes 'deg/s': if it is one quantity in two units, convert with a transform (transform "
-                              "= \"gain\", params = { k = ... }) or declare the ports in one unit; if not, the coupling "
-                              "joins the wrong ports")
+                              "takes 'deg/s': if it is one quantity in two units, convert with a transform "
+                              "(transform = \"gain\", params = { k = ... }) or declare the ports in one unit; if not, "
+                              "the coupling joins the wrong ports")
 
 
 def test_every_coupling_between_other_units_is_named_at_once() -> None:
@@ -42,8 +42,8 @@ def test_every_coupling_between_other_units_is_named_at_once() -> None:
     with pytest.raises(CouplingError) as err:
         check_units(couplings, UNITS_IN, UNITS_OUT)
     assert err.value.index == 0 and str(err.value).endswith(
-        "if not, the coupling joins the wrong ports; also [couplings[3]] coupling att.omega -> wheel.phi: units differ, the "
-        "output is in 'rad/s' and the input takes 'rad'"), err.value
+        "if not, the coupling joins the wrong ports; also [couplings[3]] coupling att.omega -> wheel.phi: units "
+        "differ, the output is in 'rad/s' and the input takes 'rad'"), err.value
 
 
 def test_a_transform_may_convert_units() -> None:
