@@ -315,7 +315,8 @@ class Coordinator:
                 except _Replaced:
                     retry = True
                 except SubsimError as exc:
-                    if action.stage > 0 and exc.code in ("model_error", "bad_value") and "finite" in exc.message:
+                    if action.stage > 0 and exc.code in ("model_error", "bad_value") and \
+                            ("not finite" in exc.message or "NaN or inf" in exc.message):  # (the runtime's words)
                         exc.add_note(f"it was at stage {action.stage} of the interval [{action.times[0]:g}, "
                                      f"{action.times[-1]:g}], on inputs the coupling iteration made: if that iteration "
                                      "diverged (values growing stage by stage), a shorter [coupling] interval is the "

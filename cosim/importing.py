@@ -125,8 +125,8 @@ def load_model(path: str, search_path: Sequence[str] = ()) -> type[Subsim]:
 
 
 def _models_in(module_name: str) -> list[str]:
-    """``module:Class`` of the classes a module, or its package's ``subsim`` module, defines on a base named
-    ``Subsim``, read from their source (for a hint only: nothing is imported or run)."""
+    """``module:Class`` of the classes a module, or its package's ``subsim`` module, defines on a base whose name
+    ends in ``Subsim`` (``Subsim``, ``ParamsSubsim``), read from their source (for a hint: nothing is run)."""
     found = []
     for name in (module_name, f"{module_name}.subsim"):
         try:
@@ -137,7 +137,7 @@ def _models_in(module_name: str) -> list[str]:
         except (Exception, SystemExit):
             continue
         found += [f"{name}:{node.name}" for node in tree.body if isinstance(node, ast.ClassDef)
-                  and any(getattr(b, "id", getattr(b, "attr", None)) == "Subsim" for b in node.bases)]
+                  and any(str(getattr(b, "id", getattr(b, "attr", ""))).endswith("Subsim") for b in node.bases)]
         if spec.submodule_search_locations is None:  # a module, not a package: no subsim module in it
             break
     return found

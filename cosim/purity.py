@@ -13,6 +13,7 @@ input array it writes into) gives a silently wrong coupled run. Use this in your
 from __future__ import annotations
 
 import copy
+import types
 from collections.abc import Callable, Mapping
 from typing import Any
 
@@ -41,7 +42,7 @@ def check_pure(
     m, state = runtime.model, np.array(runtime.state)  # a writable copy, as a model could receive
     samples = {k: np.array(v, dtype=np.float64) for k, v in inputs.items()}
     u = runtime._input_function(np.asarray(times, dtype=np.float64), samples, interp)
-    before_state, before_inputs, before_attrs = state.copy(), copy.deepcopy(samples), copy.deepcopy(vars(m))
+    before_state, before_inputs, before_attrs = state.copy(), copy.deepcopy(samples), _copies(vars(m))
 
     first_out, first_end = m.advance(state, times, u)
     first = _frozen(first_out, first_end)
@@ -62,24 +63,66 @@ def _frozen(outputs: Mapping[str, Any], end_state: Any) -> tuple:
             np.asarray(end_state, dtype=np.float64).tobytes())
 
 
+def _copies(attrs: Mapping[str, Any]) -> dict[str, Any]:
+    """A deep copy of each attribute; one that cannot be copied (an FMU's C handles) is kept as itself, and compared
+    by identity."""
+    copies = {}
+    for k, v in attrs.items():
+        try:
+            copies[k] = copy.deepcopy(v)
+        except Exception:
+            copies[k] = _Uncopied(v)
+    return copies
+
+
+class _Uncopied:
+    __slots__ = ("obj",)
+
+    def __init__(self, obj: Any) -> None:
+        self.obj = obj
+
+
 def _changed_attributes(before: dict[str, Any], after: dict[str, Any]) -> list[str]:
     names = sorted(set(before) | set(after))
-    return [n for n in names if n not in before or n not in after or not _same(before[n], after[n])]
+    return [n for n in names if n not in before or n not in after or not _same(before[n], after[n], set())]
 
 
-def _same(a: Any, b: Any) -> bool:
+def _same(a: Any, b: Any, seen: set[tuple[int, int]]) -> bool:
+    """Whether a deep copy ``a`` made before a call still equals ``b``. ``seen``: the pairs being compared (a
+    helper that refers back to the model is a cycle)."""
+    if isinstance(a, _Uncopied):
+        return a.obj is b
     if a is b:  # (a NaN is not equal to itself; deep copies keep numbers as they are)
         return True
+    if isinstance(a, float) and isinstance(b, float) and a != a and b != b:  # a NaN bound anew
+        return True
+    if (id(a), id(b)) in seen:
+        return True
+    seen = seen | {(id(a), id(b))}
     if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
         return isinstance(a, np.ndarray) and isinstance(b, np.ndarray) and a.shape == b.shape and \
             a.tobytes() == b.tobytes()
-    if isinstance(a, dict) and isinstance(b, dict):
-        return a.keys() == b.keys() and all(_same(a[k], b[k]) for k in a)
+    if isinstance(a, dict) and isinstance(b, dict):  # a cache of pure results may grow (as the runtime allows)
+        return a.keys() <= b.keys() and all(_same(a[k], b[k], seen) for k in a)
     if isinstance(a, (list, tuple)) and isinstance(b, (list, tuple)):
-        return type(a) is type(b) and len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b))
+        return type(a) is type(b) and len(a) == len(b) and all(_same(x, y, seen) for x, y in zip(a, b))
+    if isinstance(a, types.MethodType) and isinstance(b, types.MethodType):  # a copied bound method: its copied self
+        return a.__func__ is b.__func__ and _same(a.__self__, b.__self__, seen)
     if type(a) is type(b) and type(a).__eq__ is object.__eq__:  # a deep copy is another object: compare insides
-        return _same(vars(a), vars(b)) if hasattr(a, "__dict__") and hasattr(b, "__dict__") else True
+        return _same(_insides(a), _insides(b), seen)
     try:
         return bool(a == b)
     except Exception:  # objects without a usable equality: compare what they hold
-        return _same(vars(a), vars(b)) if hasattr(a, "__dict__") and hasattr(b, "__dict__") else a is b
+        return _same(_insides(a), _insides(b), seen)
+
+
+def _insides(x: Any) -> Any:
+    """What an object holds, as copying sees it: the arguments and state its ``__reduce_ex__`` gives (its
+    attributes, slots, a random generator's state), else its attributes; None for an object that holds nothing."""
+    try:
+        reduced = x.__reduce_ex__(4)
+        if isinstance(reduced, tuple):
+            return list(reduced[1:3])
+    except Exception:
+        pass
+    return vars(x) if hasattr(x, "__dict__") else None

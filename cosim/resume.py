@@ -43,11 +43,23 @@ def fingerprinted(raw: Mapping[str, Any], method: str) -> dict[str, Any]:
 
 
 def changes(old: Any, new: Any, where: str = "") -> list[str]:
-    """The keys whose values differ between two fingerprinted scenarios, ``key: old -> new``."""
+    """The keys whose values differ between two fingerprinted scenarios, ``key: old -> new`` (a list's items by
+    index while it keeps its length)."""
     if isinstance(old, dict) and isinstance(new, dict):
         return [c for k in sorted(old.keys() | new.keys(), key=str)
                 for c in changes(old.get(k, "(none)"), new.get(k, "(none)"), f"{where}.{k}" if where else k)]
-    return [] if old == new else [f"{where}: {json.dumps(old)} -> {json.dumps(new)}"]
+    if isinstance(old, list) and isinstance(new, list):
+        if len(old) == len(new):
+            return [c for i, (a, b) in enumerate(zip(old, new)) for c in changes(a, b, f"{where}[{i}]")]
+        return [f"{where}: {len(old)} -> {len(new)} items"]
+    a, b = _shown(old), _shown(new)
+    return [] if a == b else [f"{where}: {a} -> {b}"]
+
+
+def _shown(v: Any) -> str:
+    """A fingerprinted value as a line shows it: a whole number without '.0', at most 60 characters."""
+    text = json.dumps(int(v) if isinstance(v, float) and v.is_integer() else v)
+    return text if len(text) <= 60 else text[:57] + "..."
 
 
 def _numbers_as_floats(v: Any) -> Any:

@@ -7,6 +7,7 @@ Every command either succeeds or raises ``CosimError`` with nothing committed ch
 from __future__ import annotations
 
 import copy
+import hashlib
 import math
 import os
 import sysconfig
@@ -55,17 +56,16 @@ VALUES = (bool, int, float, complex, str, bytes, tuple, frozenset, type(None))  
 
 def attribute_marks(model: object) -> dict[str, Any]:
     """What tells a model's attribute changed (:func:`_mark` of each); :func:`changed_attributes` compares two."""
-    budget = _Budget()
-    return {k: _mark(v, budget, set()) for k, v in vars(model).items()}
+    return {k: _mark(v, _Budget(), ()) for k, v in vars(model).items()}
 
 
 class _Budget:
-    """How much of a model's attributes is looked into: past it, a container or object is marked as itself."""
+    """How much of one attribute is looked into: past it, a container is marked as itself (what it holds unseen)."""
 
     __slots__ = ("items", "nbytes")
 
     def __init__(self) -> None:
-        self.items, self.nbytes = 100_000, 64 << 20
+        self.items, self.nbytes = 100_000, 1 << 30
 
     def take(self, items: int = 0, nbytes: int = 0) -> bool:
         if items > self.items or nbytes > self.nbytes:
@@ -88,23 +88,45 @@ class _Ref:
     __hash__ = None  # type: ignore[assignment]
 
 
-def _mark(v: Any, budget: _Budget, seen: set[int]) -> Any:
-    """A value as itself; an array by its bytes; a list, tuple, dict or set by its items' marks (so an item
-    appended or changed in place shows); any other object as itself (what it holds is not looked into: a helper
-    object of the model's, an FMU's instance, may change inside while ``advance`` is pure). Within ``budget``."""
-    if isinstance(v, np.ndarray):
-        return ("array", v.dtype.str, v.shape, v.tobytes()) if budget.take(nbytes=v.nbytes) else _Ref(v)
-    if isinstance(v, VALUES) and type(v) not in (tuple, frozenset):
+class _Grown(dict):
+    """A dict's mark: the same as a later one that has every key of it, unchanged, and maybe more (a cache of pure
+    results, filled as ``advance`` needs them, grows; a counter kept in a dict changes a value)."""
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, _Grown) and all(k in other and _same(v, other[k]) for k, v in self.items())
+
+    __hash__ = None  # type: ignore[assignment]
+
+
+_NAN = ("nan",)  # every NaN's mark: a NaN bound anew is the same value
+DEPTH = 32  # levels of containers looked into
+
+
+def _mark(v: Any, budget: _Budget, within: tuple[int, ...]) -> Any:
+    """A value by its value (an array by a digest of its bytes); a list, tuple, deque, dict or set, of any subclass,
+    by its items' marks (so an item appended or changed in place shows); any other object as itself (what a helper
+    object or an FMU's instance holds is not looked into: ``advance`` may be pure while it changes inside).
+    ``within``: the ids of the containers it is in (a cycle, and more than DEPTH levels, end in identity)."""
+    if isinstance(v, np.ndarray):  # (its digest, not a copy of its bytes: a big table costs no memory)
+        if not budget.take(nbytes=v.nbytes) and within:
+            return _Ref(v)
+        data = v.data if v.flags.c_contiguous else v.tobytes()
+        return ("array", v.dtype.str, v.shape, hashlib.blake2b(data, digest_size=16).digest())
+    if isinstance(v, float):
+        return _NAN if v != v else v
+    if isinstance(v, (bytearray, memoryview)):
+        return ("bytes", bytes(v))
+    if isinstance(v, VALUES + (np.generic,)) and not isinstance(v, (tuple, frozenset)):
         return v
-    if id(v) in seen:  # a cycle
+    if id(v) in within or len(within) >= DEPTH:
         return _Ref(v)
-    seen = seen | {id(v)}
-    if type(v) in (list, tuple, dict, set, frozenset) and budget.take(items=len(v)):
+    if isinstance(v, (list, tuple, deque, dict, set, frozenset)) and budget.take(items=len(v)):
+        inside = (*within, id(v))
         if isinstance(v, dict):
-            return ("dict", [(_mark(k, budget, seen), _mark(x, budget, seen)) for k, x in v.items()])
+            return _Grown({k: _mark(x, budget, inside) for k, x in v.items()})
         if isinstance(v, (set, frozenset)):
-            return ("set", [_mark(x, budget, seen) for x in v])
-        return (type(v).__name__, [_mark(x, budget, seen) for x in v])
+            return ("set", frozenset(v))
+        return (type(v).__name__, [_mark(x, budget, inside) for x in v])
     return v if isinstance(v, VALUES) else _Ref(v)
 
 

@@ -193,3 +193,9 @@ def test_not_converged_says_what_to_try_from_how_the_residuals_went() -> None:
         assert last.startswith("  to try: a shorter [coupling] interval") and "the iteration diverges" in last, last
     halving = str(NotConverged(0.0, 10.0, 6, ["a.x"], {"a.x": [0.0, 6.0e5, 0.0, 2.0e5, 0.0, 5.0e4]}))
     assert "more [coupling] max_stages (the residuals still fall)" in halving.splitlines()[-1]
+    # (red team) a steady contraction of 0.8 a stage still falls; round-off noise and a swinging descent do not grow
+    steady = str(NotConverged(0.0, 1.0, 30, ["a.x"], {"a.x": [0.8 ** i for i in range(30)]}))
+    assert "more [coupling] max_stages (the residuals still fall)" in steady.splitlines()[-1]
+    for calm in ([1.1e-15, 2.2e-15, 1.1e-15, 3.3e-15, 2.2e-15, 4.4e-16, 1.1e-15, 2.3e-15],
+                 [8.6, 5.0, 6.0, 3.0, 4.0, 2.0, 1.5, 0.91]):
+        assert "diverges" not in str(NotConverged(0.0, 1.0, 8, ["a.x"], {"a.x": calm}))

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+from collections import deque
 from collections.abc import Callable
 from pathlib import Path
 
@@ -221,8 +222,29 @@ class _Appending(_Cached):
         return super().advance(state, times, u)
 
 
+class _Queued(_Cached):
+    """Keeps the last inputs in a deque (any list, dict or set subclass is looked into too)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.recent: deque = deque(maxlen=3)
+
+    def advance(self, state, times, u):
+        self.recent.append(float(times[-1]))
+        return super().advance(state, times, u)
+
+
+class _TableAndCounter(_Counting):
+    """A big read-only table before the counter: it used up the items looked into, for every attribute after it."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.lookup = [[float(i), 2.0 * i] for i in range(40_000)]
+
+
 @pytest.mark.parametrize(("model", "name"), [(_Drifting, "h"), (_Lagging, "last"), (_Counting, "calls"),
-                                             (_Appending, "history")])
+                                             (_Appending, "history"), (_Queued, "recent"),
+                                             (_TableAndCounter, "calls")])
 def test_a_model_that_keeps_run_state_in_its_attributes_is_refused_by_name(model: type[Subsim], name: str) -> None:
     h = InProcessHandle(model(), "m")
     h.configure({})
@@ -249,14 +271,39 @@ class _Rebinding(_Cached):
 
 
 class _Holding(_Cached):
-    """Keeps containers it only reads, one holding a helper object and a NaN: pure, and not refused."""
+    """Keeps containers it only reads, one holding a helper object and a NaN, and a list nested 600 deep (a red team
+    found the runtime's recursion end in a RecursionError there), and binds a NumPy number and a NaN anew: pure."""
 
     def __init__(self) -> None:
         super().__init__()
         self.parts = {"helper": object(), "limits": [float("nan"), 1.0], "table": np.arange(4.0)}
+        self.k, self.nan = np.int64(3), float("nan")
+
+    def initial_state(self, params):
+        nested = None
+        for i in range(600):
+            nested = (float(i), nested)
+        self.nested = nested
+        return super().initial_state(params)
+
+    def advance(self, state, times, u):
+        self.k, self.nan = np.int64(3), float("nan")
+        return super().advance(state, times, u)
 
 
-@pytest.mark.parametrize("model", [_Cached, _Rebinding, _Holding])
+class _Memo(_Cached):
+    """Fills a cache of pure results as advance needs them: a dict that only grows is not run state."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.factors: dict[float, float] = {}
+
+    def advance(self, state, times, u):
+        self.factors.setdefault(round(float(times[-1] - times[0]), 12), 1.0)
+        return super().advance(state, times, u)
+
+
+@pytest.mark.parametrize("model", [_Cached, _Rebinding, _Holding, _Memo])
 def test_a_model_that_only_reads_its_attributes_runs(model: type[Subsim]) -> None:
     check_pure(model(), {}, np.linspace(0.0, 0.4, 3), {"u": np.zeros((3, 1))})
     h = InProcessHandle(model(), "m")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import ctypes
 from collections.abc import Mapping
 from typing import Any
 
@@ -58,6 +59,56 @@ class Drifting(Decay):
         return out, end
 
 
+class _Tally:
+    __slots__ = ("n",)
+
+    def __init__(self) -> None:
+        self.n = 0
+
+
+class SlotCounting(Decay):
+    """Counts in a helper with __slots__ (no __dict__: it passed as pure, red team)."""
+
+    def initial_state(self, params):
+        self.tally = _Tally()
+        return super().initial_state(params)
+
+    def advance(self, state, times, u):
+        self.tally.n += 1
+        return super().advance(state, times, u)
+
+
+class Drawing(Decay):
+    """Draws from a random generator it keeps: its state changes in C (it passed as pure)."""
+
+    def initial_state(self, params):
+        self.rng = np.random.default_rng(1)
+        return super().initial_state(params)
+
+    def advance(self, state, times, u):
+        self.rng.random()
+        return super().advance(state, times, u)
+
+
+class _Solver:
+    def __init__(self, model: Subsim) -> None:
+        self.model = model
+
+
+class Wired(Decay):
+    """A helper that refers back to the model, a stored bound method, a C pointer that cannot be copied, and a
+    cache that only grows: pure (each made check_pure fail, or raise)."""
+
+    def initial_state(self, params):
+        self.solver, self.step, self.handle = _Solver(self), self.advance, ctypes.pointer(ctypes.c_double(1.0))
+        self.cache: dict[float, float] = {}
+        return super().initial_state(params)
+
+    def advance(self, state, times, u):
+        self.cache.setdefault(float(times[-1]), 1.0)
+        return super().advance(state, times, u)
+
+
 INPUTS = {"u": np.linspace(0.0, 1.0, 5)[:, None]}
 
 
@@ -65,6 +116,7 @@ INPUTS = {"u": np.linspace(0.0, 1.0, 5)[:, None]}
     (Decay, {}, INPUTS),
     (Integrator, {"size": 2, "y0": [1.0, 2.0]}, {"u": np.ones((5, 2))}),
     (Mass, {"m": 2.0, "u0": 0.1}, {"F": np.ones((5, 1))}),
+    (Wired, {}, INPUTS),
 ])
 def test_pure_models_pass(model, params, inputs) -> None:
     check_pure(model, params, TIMES, inputs)
@@ -74,6 +126,8 @@ def test_pure_models_pass(model, params, inputs) -> None:
     (Counting, "changed the model's attributes ['calls']"),
     (InPlace, "wrote into the state"),
     (Drifting, "changed the model's attributes ['bias']"),
+    (SlotCounting, "changed the model's attributes ['tally']"),
+    (Drawing, "changed the model's attributes ['rng']"),
 ])
 def test_impure_models_are_named_with_what_they_broke(model, words: str) -> None:
     with pytest.raises(ImpureModel, match=words.replace("[", r"\[").replace("]", r"\]")):

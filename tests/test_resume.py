@@ -79,7 +79,7 @@ def test_a_resume_point_of_another_scenario_or_none_is_refused(tmp_path: Path) -
     changed = parse({**sc.raw, "coupling": {**sc.raw["coupling"], "samples": 6}}, sc.path)
     with pytest.raises(OutputError, match="a resume point of another scenario or method") as err:
         run_scenario(changed, stop=2.0, output=out, inprocess=True, progress=False, resume=True)
-    assert "(they must be the same but for stop; changed: coupling.samples: 5.0 -> 6.0)" in str(err.value)
+    assert "(they must be the same but for stop; changed: coupling.samples: 5 -> 6)" in str(err.value)
     with pytest.raises(OutputError, match="a resume point of another scenario or method") as err:
         run_scenario(sc, method="centralized", stop=2.0, output=out, inprocess=True, progress=False, resume=True)
     assert 'changed: method: "distributed" -> "centralized")' in str(err.value)  # what changed, named

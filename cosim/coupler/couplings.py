@@ -142,7 +142,7 @@ def _check_one(c: Coupling, inputs: Ports, outputs: Ports, driven: dict[SignalRe
 def check_units(couplings: Sequence[Coupling], inputs: Units, outputs: Units) -> None:
     """An identity coupling joins ports of the same unit where both declare one (a transform may convert, so its
     ports are not compared). Units are compared as written: 'rad/s' and 'deg/s' differ, so do 'm/s' and 'm s^-1'.
-    A product may be written with a space, '*', '.' or a middle dot ('N m' is 'N*m').
+    A product may be written with a space, '*', '.' or a dot ('N m' is 'N*m'), a quotient with or without spaces.
     Raises CouplingError naming the first such coupling, and the others after it (one run to see them all)."""
     bad = []
     for i, c in enumerate(couplings):
@@ -161,7 +161,9 @@ def check_units(couplings: Sequence[Coupling], inputs: Units, outputs: Units) ->
 
 def _unit(text: str) -> str:
     """A unit as compared: the product signs written alike."""
-    return " ".join(text.replace("*", " ").replace("\u00b7", " ").replace(".", " ").split())
+    for product in ("*", "\u00b7", "\u22c5", "."):
+        text = text.replace(product, " ")
+    return "/".join(" ".join(part.split()) for part in text.split("/"))
 
 
 def _try_transform(c: Coupling, inputs: Ports, outputs: Ports) -> None:

@@ -192,12 +192,15 @@ class NotConverged(RuntimeError):
 
 
 def _trend(r: Sequence[float]) -> str:
-    """How a signal's residuals go over the last stages: "growing", "falling" (by half at least) or "stalled". Over
-    pairs of stages: a Jacobi iteration of two subsims changes each signal every other stage (0, 6e5, 0, 4.8e5)."""
+    """How a signal's residuals go over the last stages: "growing" (the largest of the last k above 1.2 times that
+    of the k before), "falling" (below 0.7 times it) or "stalled". Over windows of k = 2 to 4 stages, not stage by
+    stage: a Jacobi iteration of two subsims changes each signal every other stage (0, 6e5, 0, 4.8e5), and a
+    converging one may swing on its way down."""
     if len(r) < 3:
         return "falling"  # too few stages to tell
-    recent, before = max(r[-2:]), max(r[-4:-2])
-    return "growing" if recent > before else "falling" if recent <= 0.5 * before else "stalled"
+    k = min(4, len(r) // 2)
+    recent, before = max(r[-k:]), max(r[-2 * k:-k])
+    return "growing" if recent > 1.2 * before else "falling" if recent < 0.7 * before else "stalled"
 
 
 class RetryInterval(Exception):
