@@ -54,8 +54,8 @@ ATTRIBUTES_WATCHED = 3  # run_intervals after a configure whose model attributes
 VALUES = (bool, int, float, complex, str, bytes, tuple, frozenset, type(None))  # compared by value
 
 
-def attribute_marks(model: object) -> dict[str, Any]:
-    """What tells a model's attribute changed (:func:`_mark` of each); :func:`changed_attributes` compares two."""
+def _attribute_marks(model: object) -> dict[str, Any]:
+    """What tells a model's attribute changed (:func:`_mark` of each); :func:`_changed_attributes` compares two."""
     return {k: _mark(v, _Budget(), ()) for k, v in vars(model).items()}
 
 
@@ -130,8 +130,8 @@ def _mark(v: Any, budget: _Budget, within: tuple[int, ...]) -> Any:
     return v if isinstance(v, VALUES) else _Ref(v)
 
 
-def changed_attributes(before: Mapping[str, Any], after: Mapping[str, Any]) -> list[str]:
-    """The names of the attributes whose :func:`attribute_marks` differ (added and removed ones included)."""
+def _changed_attributes(before: Mapping[str, Any], after: Mapping[str, Any]) -> list[str]:
+    """The names of the attributes whose :func:`_attribute_marks` differ (added and removed ones included)."""
     return sorted(k for k in set(before) | set(after) if k not in before or k not in after or not _same(before[k],
                                                                                                        after[k]))
 
@@ -312,7 +312,7 @@ class Runtime:
             raise CosimError("bad_value", f"interp: {exc}") from None
         u = self._input_function(times, inputs, interp)
         watched = self._attributes_watched > 0 and hasattr(self.model, "__dict__")
-        before = attribute_marks(self.model) if watched else None
+        before = _attribute_marks(self.model) if watched else None
         try:
             result = self.model.advance(state, times, u)
         except ModelError as exc:
@@ -321,7 +321,7 @@ class Runtime:
             raise _model_exception("advance", exc) from None
         if before is not None:
             self._attributes_watched -= 1
-            changed = changed_attributes(before, attribute_marks(self.model))
+            changed = _changed_attributes(before, _attribute_marks(self.model))
             if changed:  # what evolves there is not rolled back, and a repeated stage integrates it again
                 raise CosimError("model_error", f"advance() changed the model's attribute(s) {changed} (over t in "
                                  f"[{times[0]:g}, {times[-1]:g}]): what evolves belongs in the state vector, which "
