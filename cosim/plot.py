@@ -17,6 +17,7 @@ dependency (``pip install 'cosim[plot]'``).
 from __future__ import annotations
 
 import argparse
+import csv
 import math
 import re
 import sys
@@ -226,12 +227,56 @@ def plot_files(paths: Sequence[Path], out: Path, signals: Sequence[str] | None =
     return written
 
 
+DIAGNOSTICS = (("stages", "stages"), ("length_s", "interval length (s)"), ("error", "error / interval_tol"),
+               ("largest_residual", "largest residual"), ("wall_time_s", "wall time (s)"))  # columns drawn
+
+
+class _Diagnostics:
+    """A diagnostics file (``x.csv.diag.csv``) as :func:`figure` takes a result: each interval at its end time."""
+
+    def __init__(self, path: Path) -> None:
+        try:
+            with open(path, newline="") as f:
+                rows = list(csv.reader(f))
+            header, values = rows[0], np.array(rows[1:], dtype=np.float64).reshape(-1, len(rows[0]))
+        except (OSError, ValueError, IndexError) as exc:
+            raise PlotError(f"{path} is not a diagnostics file cosim wrote ({exc})") from None
+        self.label, self.columns = path.name, dict(zip(header, values.T))
+        if "t1" not in self.columns:
+            raise PlotError(f"{path} is not a diagnostics file cosim wrote (no t1 column)")
+        self.t = self.columns["t1"]
+
+
+def plot_diagnostics(paths: Sequence[Path], out: Path) -> list[Path]:
+    """``<out>/diagnostics.png``: each interval's stages, length, error estimate, residual and wall time against
+    its end time, a line per file (what an automatic interval did, or where a run took more stages)."""
+    diags = [_Diagnostics(Path(p)) for p in paths]
+    shown = [(key, label) for key, label in DIAGNOSTICS if all(key in d.columns for d in diags)]
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise PlotError(f"cannot create the plot directory {out} ({exc.strerror}): choose another --out") from None
+    series = [np.column_stack([d.columns[key] for key, _ in shown]) for d in diags]
+    return [figure(diags, series, "diagnostics per interval", [label for _, label in shown],  # type: ignore[arg-type]
+                   out / "diagnostics.png")]
+
+
 def plot_command(args: argparse.Namespace) -> int:
-    """``cosim plot RESULTS... [--out DIR] [--signals ...]`` (and ``args.window`` = (t0, t1) if present)."""
+    """``cosim plot RESULTS... [--out DIR] [--signals ...]`` (and ``args.window`` = (t0, t1) if present). Given
+    diagnostics files only, their columns."""
+    if args.results and all(p.name.endswith(".diag.csv") for p in args.results):
+        try:
+            written = plot_diagnostics(args.results, args.out)
+        except PlotError as exc:
+            print(f"cosim plot: {exc}", file=sys.stderr)
+            return 2
+        print("\n".join(map(str, written)))
+        return 0
     paths = [p for p in args.results if not p.name.endswith(SIDECARS)]  # `cosim plot results/*` works
     for p in args.results:
         if p not in paths:
-            print(f"cosim plot: skipping {p}, which belongs to a result file", file=sys.stderr)
+            print(f"cosim plot: skipping {p}, which belongs to a result file (given alone, a diagnostics file is "
+                  "plotted)", file=sys.stderr)
     try:
         if not paths:
             raise PlotError("no result files given (only the diagnostics, units, locks or streams beside them)")

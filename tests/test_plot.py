@@ -266,3 +266,25 @@ def test_a_png_appears_whole_or_not_at_all(tmp_path: Path, monkeypatch: pytest.M
     with pytest.raises(RuntimeError, match="renderer died"):
         plot_files([generic_result(tmp_path / "a.csv")], tmp_path / "png")
     assert list((tmp_path / "png").iterdir()) == []
+
+
+def test_a_diagnostics_file_given_alone_is_plotted(tmp_path: Path, capsys: pytest.CaptureFixture,
+                                                   drawn: dict[str, dict]) -> None:
+    """It was refused as 'belonging to a result file' (exit 2): the stages, lengths and error estimates of an
+    automatic interval's run could not be seen (newcomer probe)."""
+    diag = tmp_path / "a.csv.diag.csv"
+    diag.write_text("interval,t0,t1,stages,largest_residual,wall_time_s,halvings,restarts,length_s,error\n"
+                    "1,0.0,0.4,3,1e-12,0.01,0,0,0.4,0.25\n2,0.4,1.2,2,2e-12,0.02,1,0,0.8,0.5\n")
+    assert cosim_main(["plot", str(diag), "--out", str(tmp_path / "png")]) == 0
+    (printed,) = capsys.readouterr().out.split()
+    assert Path(printed).name == "diagnostics.png"
+    assert_real_png(Path(printed))
+    shown = drawn["diagnostics.png"]
+    assert shown["ylabels"] == ["stages", "interval length (s)", "error / interval_tol", "largest residual",
+                                "wall time (s)"]
+    (label, t, stages), = shown["lines"][0]
+    assert label == "a.csv.diag.csv" and list(t) == [0.4, 1.2] and list(stages) == [3.0, 2.0]
+    assert list(shown["lines"][2][0][2]) == [0.25, 0.5]
+    (tmp_path / "x.diag.csv").write_text("not,a\ndiagnostics,file\n")
+    assert cosim_main(["plot", str(tmp_path / "x.diag.csv"), "--out", str(tmp_path / "png")]) == 2
+    assert "is not a diagnostics file cosim wrote" in capsys.readouterr().err
