@@ -42,7 +42,8 @@ def check_pure(
     m, state = runtime.model, np.array(runtime.state)  # a writable copy, as a model could receive
     samples = {k: np.array(v, dtype=np.float64) for k, v in inputs.items()}
     u = runtime._input_function(np.asarray(times, dtype=np.float64), samples, interp)
-    before_state, before_inputs, before_attrs = state.copy(), copy.deepcopy(samples), _copies(vars(m))
+    caches = set(getattr(m, "caches", ()))  # declared: filled with pure results, not compared
+    before_state, before_inputs, before_attrs = state.copy(), copy.deepcopy(samples), _copies(vars(m), caches)
 
     first_out, first_end = m.advance(state, times, u)
     first = _frozen(first_out, first_end)
@@ -50,7 +51,7 @@ def check_pure(
         raise ImpureModel("advance() wrote into the state it was given (copy it before changing it)")
     if not all(np.array_equal(samples[k], before_inputs[k]) for k in samples):
         raise ImpureModel("advance() wrote into the input samples")
-    changed = _changed_attributes(before_attrs, vars(m))
+    changed = _changed_attributes(before_attrs, {k: v for k, v in vars(m).items() if k not in caches})
     if changed:
         raise ImpureModel(f"advance() changed the model's attributes {changed}: keep run state in the state vector")
     second = _frozen(*m.advance(state, times, u))
@@ -63,11 +64,13 @@ def _frozen(outputs: Mapping[str, Any], end_state: Any) -> tuple:
             np.asarray(end_state, dtype=np.float64).tobytes())
 
 
-def _copies(attrs: Mapping[str, Any]) -> dict[str, Any]:
-    """A deep copy of each attribute; one that cannot be copied (an FMU's C handles) is kept as itself, and compared
-    by identity."""
+def _copies(attrs: Mapping[str, Any], caches: set[str]) -> dict[str, Any]:
+    """A deep copy of each attribute but the caches; one that cannot be copied (an FMU's C handles) is kept as itself,
+    and compared by identity."""
     copies = {}
     for k, v in attrs.items():
+        if k in caches:
+            continue
         try:
             copies[k] = copy.deepcopy(v)
         except Exception:
@@ -84,7 +87,14 @@ class _Uncopied:
 
 def _changed_attributes(before: dict[str, Any], after: dict[str, Any]) -> list[str]:
     names = sorted(set(before) | set(after))
-    return [n for n in names if n not in before or n not in after or not _same(before[n], after[n], set())]
+    return [n for n in names if n not in before or n not in after or not _compared(before[n], after[n])]
+
+
+def _compared(a: Any, b: Any) -> bool:
+    try:
+        return _same(a, b, set())
+    except RecursionError:  # linked deeper than Python recurses (a long chain of helper objects): not told apart
+        return True
 
 
 def _same(a: Any, b: Any, seen: set[tuple[int, int]]) -> bool:
@@ -100,10 +110,13 @@ def _same(a: Any, b: Any, seen: set[tuple[int, int]]) -> bool:
         return True
     seen = seen | {(id(a), id(b))}
     if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
-        return isinstance(a, np.ndarray) and isinstance(b, np.ndarray) and a.shape == b.shape and \
-            a.tobytes() == b.tobytes()
-    if isinstance(a, dict) and isinstance(b, dict):  # a cache of pure results may grow (as the runtime allows)
-        return a.keys() <= b.keys() and all(_same(a[k], b[k], seen) for k in a)
+        if not (isinstance(a, np.ndarray) and isinstance(b, np.ndarray) and a.shape == b.shape):
+            return False
+        if a.dtype.hasobject:  # deep copies of its items (a ragged table): compared item by item
+            return all(_same(x, y, seen) for x, y in zip(a.ravel(), b.ravel()))
+        return a.tobytes() == b.tobytes()
+    if isinstance(a, dict) and isinstance(b, dict):
+        return a.keys() == b.keys() and all(_same(a[k], b[k], seen) for k in a)
     if isinstance(a, (list, tuple)) and isinstance(b, (list, tuple)):
         return type(a) is type(b) and len(a) == len(b) and all(_same(x, y, seen) for x, y in zip(a, b))
     if isinstance(a, types.MethodType) and isinstance(b, types.MethodType):  # a copied bound method: its copied self

@@ -42,24 +42,32 @@ def fingerprinted(raw: Mapping[str, Any], method: str) -> dict[str, Any]:
     return json.loads(json.dumps({**tables, "method": method}, sort_keys=True, default=repr))
 
 
+_ABSENT = object()  # a key one of the two scenarios does not have
+
+
 def changes(old: Any, new: Any, where: str = "") -> list[str]:
     """The keys whose values differ between two fingerprinted scenarios, ``key: old -> new`` (a list's items by
     index while it keeps its length)."""
     if isinstance(old, dict) and isinstance(new, dict):
         return [c for k in sorted(old.keys() | new.keys(), key=str)
-                for c in changes(old.get(k, "(none)"), new.get(k, "(none)"), f"{where}.{k}" if where else k)]
+                for c in changes(old.get(k, _ABSENT), new.get(k, _ABSENT), f"{where}.{k}" if where else k)]
     if isinstance(old, list) and isinstance(new, list):
         if len(old) == len(new):
             return [c for i, (a, b) in enumerate(zip(old, new)) for c in changes(a, b, f"{where}[{i}]")]
         return [f"{where}: {len(old)} -> {len(new)} items"]
-    a, b = _shown(old), _shown(new)
-    return [] if a == b else [f"{where}: {a} -> {b}"]
+    a, b = _text(old), _text(new)  # (as the fingerprint sees them: -0.0 is not 0.0)
+    return [] if a == b else [f"{where}: {_shown(old, a)} -> {_shown(new, b)}"]
 
 
-def _shown(v: Any) -> str:
-    """A fingerprinted value as a line shows it: a whole number without '.0', at most 60 characters."""
-    text = json.dumps(int(v) if isinstance(v, float) and v.is_integer() else v)
-    return text if len(text) <= 60 else text[:57] + "..."
+def _text(v: Any) -> str:
+    return "(absent)" if v is _ABSENT else json.dumps(v, sort_keys=True, ensure_ascii=False)
+
+
+def _shown(v: Any, text: str) -> str:
+    """A value as a line shows it: a whole number without '.0', at most 60 characters."""
+    if isinstance(v, float) and v.is_integer() and abs(v) < 1e15 and text != "-0.0":
+        text = str(int(v))
+    return text if len(text) <= 60 else text[:28] + "..." + text[-29:]
 
 
 def _numbers_as_floats(v: Any) -> Any:

@@ -55,8 +55,17 @@ VALUES = (bool, int, float, complex, str, bytes, tuple, frozenset, type(None))  
 
 
 def _attribute_marks(model: object) -> dict[str, Any]:
-    """What tells a model's attribute changed (:func:`_mark` of each); :func:`_changed_attributes` compares two."""
-    return {k: _mark(v, _Budget(), ()) for k, v in vars(model).items()}
+    """What tells a model's attribute changed (:func:`_mark` of each, but for the caches it declares);
+    :func:`_changed_attributes` compares two."""
+    caches = set(getattr(model, "caches", ()))
+    return {k: _marked(v) for k, v in vars(model).items() if k not in caches}
+
+
+def _marked(v: Any) -> Any:
+    try:
+        return _mark(v, _Budget(), ())
+    except Exception:  # an object that cannot be looked into (a released memoryview, a __len__ raising): itself
+        return _Ref(v)
 
 
 class _Budget:
@@ -65,7 +74,7 @@ class _Budget:
     __slots__ = ("items", "nbytes")
 
     def __init__(self) -> None:
-        self.items, self.nbytes = 100_000, 1 << 30
+        self.items, self.nbytes = 20_000, 1 << 30
 
     def take(self, items: int = 0, nbytes: int = 0) -> bool:
         if items > self.items or nbytes > self.nbytes:
@@ -88,34 +97,23 @@ class _Ref:
     __hash__ = None  # type: ignore[assignment]
 
 
-class _Grown(dict):
-    """A dict's mark: the same as a later one that has every key of it, unchanged, and maybe more (a cache of pure
-    results, filled as ``advance`` needs them, grows; a counter kept in a dict changes a value)."""
-
-    def __eq__(self, other: object) -> bool:
-        return isinstance(other, _Grown) and all(k in other and _same(v, other[k]) for k, v in self.items())
-
-    __hash__ = None  # type: ignore[assignment]
-
-
 _NAN = ("nan",)  # every NaN's mark: a NaN bound anew is the same value
 DEPTH = 32  # levels of containers looked into
 
 
 def _mark(v: Any, budget: _Budget, within: tuple[int, ...]) -> Any:
-    """A value by its value (an array by a digest of its bytes); a list, tuple, deque, dict or set, of any subclass,
-    by its items' marks (so an item appended or changed in place shows); any other object as itself (what a helper
-    object or an FMU's instance holds is not looked into: ``advance`` may be pure while it changes inside).
-    ``within``: the ids of the containers it is in (a cycle, and more than DEPTH levels, end in identity)."""
-    if isinstance(v, np.ndarray):  # (its digest, not a copy of its bytes: a big table costs no memory)
+    """A value by its value (an array by its bytes); a list, tuple, deque, dict or set, of any subclass, by its
+    items' marks (so an item appended or changed in place shows); any other object as itself (what a helper object
+    or an FMU's instance holds is not looked into: ``advance`` may be pure while it changes inside). ``within``: the
+    ids of the containers it is in (a cycle, and more than DEPTH levels, end in identity)."""
+    if isinstance(v, np.ndarray):
         if not budget.take(nbytes=v.nbytes) and within:
             return _Ref(v)
-        data = v.data if v.flags.c_contiguous else v.tobytes()
-        return ("array", v.dtype.str, v.shape, hashlib.blake2b(data, digest_size=16).digest())
-    if isinstance(v, float):
+        return ("array", v.dtype.str, v.shape, _contents(v))
+    if isinstance(v, (float, np.floating)):
         return _NAN if v != v else v
     if isinstance(v, (bytearray, memoryview)):
-        return ("bytes", bytes(v))
+        return ("bytes", _contents(np.frombuffer(v, np.uint8))) if budget.take(nbytes=len(v)) else _Ref(v)
     if isinstance(v, VALUES + (np.generic,)) and not isinstance(v, (tuple, frozenset)):
         return v
     if id(v) in within or len(within) >= DEPTH:
@@ -123,11 +121,22 @@ def _mark(v: Any, budget: _Budget, within: tuple[int, ...]) -> Any:
     if isinstance(v, (list, tuple, deque, dict, set, frozenset)) and budget.take(items=len(v)):
         inside = (*within, id(v))
         if isinstance(v, dict):
-            return _Grown({k: _mark(x, budget, inside) for k, x in v.items()})
+            return ("dict", {k: _mark(x, budget, inside) for k, x in v.items()})
         if isinstance(v, (set, frozenset)):
             return ("set", frozenset(v))
         return (type(v).__name__, [_mark(x, budget, inside) for x in v])
     return v if isinstance(v, VALUES) else _Ref(v)
+
+
+DIGESTED = 64 << 20  # bytes: a larger array is compared by a BLAKE2 digest of its bytes, not a copy of them
+
+
+def _contents(a: np.ndarray) -> bytes:
+    """What an array holds, as bytes to compare: a copy of them, or above DIGESTED a digest (no copy)."""
+    if a.nbytes <= DIGESTED or a.dtype.hasobject:
+        return a.tobytes()
+    flat = np.ascontiguousarray(a).reshape(-1).view(np.uint8)  # (any dtype: datetime64 is no buffer of its own)
+    return hashlib.blake2b(flat.data, digest_size=16).digest()
 
 
 def _changed_attributes(before: Mapping[str, Any], after: Mapping[str, Any]) -> list[str]:
@@ -326,8 +335,9 @@ class Runtime:
                 raise CosimError("model_error", f"advance() changed the model's attribute(s) {changed} (over t in "
                                  f"[{times[0]:g}, {times[-1]:g}]): what evolves belongs in the state vector, which "
                                  "a rollback or a repeated stage restores; advance() must depend on its arguments "
-                                 "only (what it computes once, initial_state() may keep on self; cosim.check_pure "
-                                 "tests a model for this)")
+                                 "only (what it computes once, initial_state() may keep on self; a cache of pure "
+                                 "results it fills is declared: caches = ('name',); cosim.check_pure tests a model "
+                                 "for this)")
         if type(result) is not tuple or len(result) != 2:
             got = f"a tuple of {len(result)}" if isinstance(result, tuple) else type(result).__name__
             raise CosimError("model_error", f"advance() must return (outputs, end_state), got {got}")

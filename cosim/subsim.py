@@ -130,6 +130,9 @@ class Subsim:
     - ``params``: ``{parameter name: Param(default, unit, doc)}``. Optional; when given, ``configure``
       refuses any other name and ``initial_state`` sees every declared one (given or default), and
       ``describe`` (and ``cosim describe``) list them.
+    - ``caches``: names of attributes ``advance`` fills with results that depend on its arguments only (a memo of
+      matrix exponentials by step, say). ``advance`` must be pure; the runtime refuses a model whose attributes
+      change in its first runs, but for these (``cosim.check_pure`` skips them too).
     """
 
     name: ClassVar[str] = "subsim"
@@ -137,6 +140,7 @@ class Subsim:
     outputs: Mapping[str, PortSpec] = {}
     algebraic: ClassVar[bool] = False
     params: ClassVar[Mapping[str, Param]] = {}
+    caches: ClassVar[tuple[str, ...]] = ()
 
     def initial_state(self, params: Mapping[str, Any]) -> np.ndarray:
         """Read parameters (keep what ``advance`` needs on ``self``); return the state at t0.

@@ -234,6 +234,19 @@ class _Queued(_Cached):
         return super().advance(state, times, u)
 
 
+class _DictHistory(_Cached):
+    """Keeps a history in a dict, one new key a call, and reads it back: a hidden integrator (a red team found a
+    rule letting dicts grow, for caches, let it run)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.seen: dict[int, int] = {}
+
+    def advance(self, state, times, u):
+        self.seen[len(self.seen)] = self.seen.get(len(self.seen) - 1, 0) + 1
+        return super().advance(state, times, u)
+
+
 class _TableAndCounter(_Counting):
     """A big read-only table before the counter: it used up the items looked into, for every attribute after it."""
 
@@ -243,7 +256,7 @@ class _TableAndCounter(_Counting):
 
 
 @pytest.mark.parametrize(("model", "name"), [(_Drifting, "h"), (_Lagging, "last"), (_Counting, "calls"),
-                                             (_Appending, "history"), (_Queued, "recent"),
+                                             (_Appending, "history"), (_Queued, "recent"), (_DictHistory, "seen"),
                                              (_TableAndCounter, "calls")])
 def test_a_model_that_keeps_run_state_in_its_attributes_is_refused_by_name(model: type[Subsim], name: str) -> None:
     h = InProcessHandle(model(), "m")
@@ -278,6 +291,7 @@ class _Holding(_Cached):
         super().__init__()
         self.parts = {"helper": object(), "limits": [float("nan"), 1.0], "table": np.arange(4.0)}
         self.k, self.nan = np.int64(3), float("nan")
+        self.stamps = np.array(["2020-01-01"], dtype="datetime64[s]")  # (no buffer of its own: it crashed a run)
 
     def initial_state(self, params):
         nested = None
@@ -292,7 +306,9 @@ class _Holding(_Cached):
 
 
 class _Memo(_Cached):
-    """Fills a cache of pure results as advance needs them: a dict that only grows is not run state."""
+    """Fills a cache of pure results as advance needs them, declared as one."""
+
+    caches = ("factors",)
 
     def __init__(self) -> None:
         super().__init__()

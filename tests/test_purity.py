@@ -96,12 +96,19 @@ class _Solver:
 
 
 class Wired(Decay):
-    """A helper that refers back to the model, a stored bound method, a C pointer that cannot be copied, and a
-    cache that only grows: pure (each made check_pure fail, or raise)."""
+    """A helper that refers back to the model, a stored bound method, a C pointer that cannot be copied, a ragged
+    object array, a long chain of helpers and a declared cache: pure (each made check_pure fail, or raise)."""
+
+    caches = ("cache",)
 
     def initial_state(self, params):
         self.solver, self.step, self.handle = _Solver(self), self.advance, ctypes.pointer(ctypes.c_double(1.0))
         self.cache: dict[float, float] = {}
+        self.ragged = np.array([[1.0], [2.0, 3.0], {"a": 1}], dtype=object)  # deep-copied item by item
+        chain = _Solver(self)
+        for _ in range(300):  # linked deeper than the comparison recurses (it raised RecursionError)
+            chain = _Solver(chain)
+        self.chain = chain
         return super().initial_state(params)
 
     def advance(self, state, times, u):

@@ -262,3 +262,17 @@ def test_a_resume_with_another_file_a_parameter_names_goes_on_and_says_so(tmp_pa
     run_scenario(sc, stop=3.0, output=part, inprocess=True, progress=False, resume=True, log=said.append)
     assert said == [f"cosim: {fmu} is not the file the run had when its resume point at t = 2 was saved: the "
                     "results before that point came from the earlier one"]
+
+
+def test_what_changed_since_a_resume_point_is_shown_short_and_exact() -> None:
+    """(red team) a long path changed after its 57th character, and 0.0 to -0.0, showed no change at all; a removed
+    key showed as the string '(none)'; one edit in a long list printed the whole list."""
+    from cosim.resume import changes
+
+    path = "/data/models/of/the/vehicle/for/this/study/version-2026-11/mass2.fmu"
+    assert changes({"p": path, "z": 0.0, "r": 1.0, "g": list(range(5000))},
+                   {"p": path.replace("mass2", "mass3"), "z": -0.0, "g": [*range(4999), 7]}) == [
+        "g[4999]: 4999 -> 7",
+        'p: "/data/models/of/the/vehicle...dy/version-2026-11/mass2.fmu" -> "/data/models/of/the/vehicle...'
+        'dy/version-2026-11/mass3.fmu"',
+        "r: 1 -> (absent)", "z: 0 -> -0.0"]

@@ -183,22 +183,24 @@ class NotConverged(RuntimeError):
         if "growing" in trends:
             lines.append(f"  to try: {shorter}: the iteration diverges (the residuals grow), the coupling too strong "
                          "for an interval this long")
+        elif "stalled" in trends:  # more stages will not help that signal
+            lines.append(f"  to try: {shorter}, or tolerances no tighter than the models' round-off")
         elif "falling" in trends:
             lines.append(f"  to try: more [coupling] max_stages (the residuals still fall), or {shorter}")
         else:
-            lines.append(f"  to try: {shorter}, or tolerances no tighter than the models' round-off")
+            lines.append(f"  to try: more [coupling] max_stages, or {shorter}")
         super().__init__("\n".join(lines))
         self.t0, self.t1, self.stages, self.failing, self.residuals = t0, t1, stages, failing, residuals
 
 
 def _trend(r: Sequence[float]) -> str:
     """How a signal's residuals go over the last stages: "growing" (the largest of the last k above 1.2 times that
-    of the k before), "falling" (below 0.7 times it) or "stalled". Over windows of k = 2 to 4 stages, not stage by
+    of the k before), "falling" (below 0.7 times it), "stalled", or "few" (fewer than 3). Over windows of k = 2 to 4 stages, not stage by
     stage: a Jacobi iteration of two subsims changes each signal every other stage (0, 6e5, 0, 4.8e5), and a
     converging one may swing on its way down."""
     if len(r) < 3:
-        return "falling"  # too few stages to tell
-    k = min(4, len(r) // 2)
+        return "few"  # too few stages to tell
+    k = min(4, max(2, len(r) // 2))
     recent, before = max(r[-k:]), max(r[-2 * k:-k])
     return "growing" if recent > 1.2 * before else "falling" if recent < 0.7 * before else "stalled"
 
