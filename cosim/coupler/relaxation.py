@@ -195,9 +195,9 @@ class NotConverged(RuntimeError):
 
 def _trend(r: Sequence[float]) -> str:
     """How a signal's residuals go over the last stages: "growing" (the largest of the last k above 1.2 times that
-    of the k before), "falling" (below 0.7 times it), "stalled", or "few" (fewer than 3). Over windows of k = 2 to 4 stages, not stage by
-    stage: a Jacobi iteration of two subsims changes each signal every other stage (0, 6e5, 0, 4.8e5), and a
-    converging one may swing on its way down."""
+    of the k before), "falling" (below 0.7 times it), "stalled", or "few" (fewer than 3). Over windows of k = 2 to 4
+    stages, not stage by stage: a Jacobi iteration of two subsims changes each signal every other stage (0, 6e5, 0,
+    4.8e5), and a converging one may swing on its way down."""
     if len(r) < 3:
         return "few"  # too few stages to tell
     k = min(4, max(2, len(r) // 2))
