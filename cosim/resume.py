@@ -54,7 +54,12 @@ def changes(old: Any, new: Any, where: str = "") -> list[str]:
     if isinstance(old, list) and isinstance(new, list):
         if len(old) == len(new):
             return [c for i, (a, b) in enumerate(zip(old, new)) for c in changes(a, b, f"{where}[{i}]")]
-        return [f"{where}: {len(old)} -> {len(new)} items"]
+        before, after = [_text(x) for x in old], [_text(x) for x in new]
+        gone = [_shown(x, t) for x, t in zip(old, before) if t not in after]  # (a coupling added or removed: which)
+        came = [_shown(x, t) for x, t in zip(new, after) if t not in before]
+        return [f"{where}: {len(old)} -> {len(new)} items" + "".join(
+            f"; {what} {', '.join(items[:3])}{', ...' if len(items) > 3 else ''}"
+            for what, items in (("removed", gone), ("added", came)) if items)]
     a, b = _text(old), _text(new)  # (as the fingerprint sees them: -0.0 is not 0.0)
     return [] if a == b else [f"{where}: {_shown(old, a)} -> {_shown(new, b)}"]
 

@@ -276,3 +276,7 @@ def test_what_changed_since_a_resume_point_is_shown_short_and_exact() -> None:
         'p: "/data/models/of/the/vehicle...dy/version-2026-11/mass2.fmu" -> "/data/models/of/the/vehicle...'
         'dy/version-2026-11/mass3.fmu"',
         "r: 1 -> (absent)", "z: 0 -> -0.0"]
+    couplings = [{"to": "a.u", "from": ["b.y"]}, {"to": "b.u", "from": ["a.y"]}]
+    assert changes({"couplings": couplings}, {"couplings": couplings[:1]}) == [  # which one (it said 2 -> 1 only)
+        'couplings: 2 -> 1 items; removed {"from": ["a.y"], "to": "b.u"}']
+    assert changes({"g": [1.0, 2.0]}, {"g": [1.0, 2.0, 3.0, 4.0, 5.0, 6.0]}) == ["g: 2 -> 6 items; added 3, 4, 5, ..."]
