@@ -123,8 +123,10 @@ def _run_until_done(args: argparse.Namespace, state: dict) -> int:
     if report.method != "unified" and s.intervals:  # what the run cost in requests (rejected tries included)
         span = s.t_end - s.t_start
         per_second = f" ({s.round_trips / span:.3g} round trips per simulated second)" if span > 0 else ""
+        took = "" if args.inprocess or s.round_trip_median is None else \
+            f"; a round trip took {1e3 * s.round_trip_median:.2g} ms (median)"  # the link's cost (and the work)
         print(f"requests: {s.requests / s.intervals:.2f} an interval, sent in {s.round_trips / s.intervals:.2f} "
-              f"round trips{per_second}")
+              f"round trips{per_second}{took}")
     for r in report.extra.get("restarts", []):
         print(f"restart: {r.subsim} {r.reason}; " + (f"restored to t = {r.at:g}" if r.restored else
                                                       "the replacement failed while being restored"))

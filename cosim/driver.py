@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 import os
+import statistics
 import time
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
@@ -52,6 +53,7 @@ Revive = Callable[[str], SubsimHandle]  # a new process for the named subsim, co
 OnCheckpoint = Callable[[ResumePoint, dict[str, SubsimState]], None]  # every subsim's committed state there
 
 
+ROUND_TRIPS_KEPT = 10_000  # the latest Runs' times, whose median the run's summary gives
 CORES = os.cpu_count() or 1  # a run of fewer subsims leaves a core to the coordinator's own writing
 
 
@@ -192,6 +194,7 @@ class Coordinator:
         self._spare_seen = False  # a run left a core idle: intervals are recorded during such runs
         # seconds from sending to the reply of each subsim's latest run that was waited for (see _run)
         self._took: dict[str, float] = {}
+        self._round_trips: deque[float] = deque(maxlen=ROUND_TRIPS_KEPT)  # s, each Run's requests to its last reply
 
     @property
     def order(self) -> list[str]:
@@ -337,6 +340,8 @@ class Coordinator:
                 self._unrecorded.append(action.interval)
                 started = time.perf_counter()
             elif isinstance(action, Done):
+                if self._round_trips:  # (an operator reads a slow or lossy link here)
+                    action.summary.round_trip_median = statistics.median(self._round_trips)
                 return action.summary
 
     def _run(self, action: Run) -> Outputs:
@@ -376,7 +381,9 @@ class Coordinator:
             raise
         if recording is not None:
             raise recording
-        self.deadline.observe(time.perf_counter() - sent)
+        took = time.perf_counter() - sent
+        self.deadline.observe(took)
+        self._round_trips.append(took)
         uncommitted.difference_update(results)
         return {name: results[name].outputs for name in action.inputs}
 

@@ -160,6 +160,7 @@ class RunSummary:
     longest: float = 0.0
     round_trips: int = 0  # Run actions, rejected tries included (the subsims of one Run answer concurrently)
     requests: int = 0  # subsim runs, rejected tries included
+    round_trip_median: float | None = None  # s from a Run's requests to its last reply (recent ones; by the driver)
 
     def add(self, interval: Interval) -> None:
         self.t_end = float(interval.t[-1])
