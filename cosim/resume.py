@@ -55,8 +55,9 @@ def changes(old: Any, new: Any, where: str = "") -> list[str]:
         if len(old) == len(new):
             return [c for i, (a, b) in enumerate(zip(old, new)) for c in changes(a, b, f"{where}[{i}]")]
         before, after = [_text(x) for x in old], [_text(x) for x in new]
-        gone = [_shown(x, t) for x, t in zip(old, before) if t not in after]  # (a coupling added or removed: which)
-        came = [_shown(x, t) for x, t in zip(new, after) if t not in before]
+        kept_before, kept_after = set(before), set(after)
+        gone = [_shown(x, t) for x, t in zip(old, before) if t not in kept_after]  # (a coupling added or removed)
+        came = [_shown(x, t) for x, t in zip(new, after) if t not in kept_before]
         return [f"{where}: {len(old)} -> {len(new)} items" + "".join(
             f"; {what} {', '.join(items[:3])}{', ...' if len(items) > 3 else ''}"
             for what, items in (("removed", gone), ("added", came)) if items)]
