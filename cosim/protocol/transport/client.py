@@ -252,7 +252,7 @@ class RemoteHandle(SubsimHandle):
 
     def _begin(self, cmd: str, args: dict[str, Any]) -> Callable[[], dict]:
         if self._died.is_set() and not self._still_served():
-            raise self._died_error(GONE, cmd)
+            raise self._died_error(GONE, cmd, self._token_went(during=False))
         seq, payload = self._seal(encode_request(cmd, args))
         token = zenoh.CancellationToken()
         deadline = self.deadline
@@ -327,11 +327,11 @@ class RemoteHandle(SubsimHandle):
         text = reply.err.payload.to_bytes().decode(errors="replace")
         early = pending.timeout_at - time.monotonic() > min(0.5, 0.1 * (pending.timeout_at - pending.sent))
         if early and not self._died.is_set():  # a queryable's reply_err (zenoh's timeout comes from a router too)
-            return MalformedReply("bad_value", f"it answered with a Zenoh error reply ({text[:80]!r}) "
-                               "instead of a protocol reply; an error goes in a protocol reply, {\"ok\": false, "
-                               "\"error\": {...}} (docs/protocol.md 7)", self.name, cmd)
+            return MalformedReply("bad_value", f"it answered with a Zenoh error reply ({text[:80]!r}) instead of a "
+                                  "protocol reply; an error goes in a protocol reply, {\"ok\": false, \"error\": "
+                                  "{...}} (docs/protocol.md 7)", self.name, cmd)
         if self._died.is_set():
-            return self._died_error(DIED_MID_REQUEST, cmd)
+            return self._died_error(DIED_MID_REQUEST, cmd, self._token_went(during=True))
         return self._lost_in_pause(cmd, pending) or self._timed_out(cmd, pending)
 
     def _timed_out(self, cmd: str, pending: _Pending) -> SubsimError:
@@ -368,22 +368,26 @@ class RemoteHandle(SubsimHandle):
         if not self._died.is_set() and self._alive.is_set() and time.monotonic() >= pending.timeout_at:
             return self._lost_in_pause(cmd, pending) or self._timed_out(cmd, pending)
         if self._died.is_set():
-            reason = DIED_MID_REQUEST
-        elif self._alive.is_set():  # its token is up and the query ended: the process dropped it unanswered
-            reason = ("its process ended the request without a reply (its token is still up): a subsim answers "
-                      "every request it admits with exactly one reply (docs/protocol.md 1)")
-        else:
-            reason = "no process serves this subsim"
-        return self._died_error(reason, cmd)
+            return self._died_error(DIED_MID_REQUEST, cmd, self._token_went(during=True))
+        if self._alive.is_set():  # its token is up and the query ended: the process dropped it unanswered
+            return self._died_error("its process ended the request without a reply (its token is still up): a subsim "
+                                    "answers every request it admits with exactly one reply (docs/protocol.md 1)", cmd)
+        return self._died_error("no process serves this subsim", cmd)
 
-    def _died_error(self, reason: str, cmd: str) -> SubsimDied:
+    def _token_went(self, during: bool) -> str:
+        """Why its liveliness token went, for a process not known to have exited: it may not have."""
+        when = " during the request" if during else ""
+        why = " while its process still runs: its link" if self.exit_status is not None else \
+            ": the process died, or its link"
+        return f"its liveliness token went{when}{why} was silent for longer than its {self.lease:g} s lease (cut, or " \
+               "the process stopped)"
+
+    def _died_error(self, reason: str, cmd: str, unknown_exit: str | None = None) -> SubsimDied:
+        """``reason``, with how the process ended where that is known; ``unknown_exit``: the reason instead where it
+        is not (the process may still run)."""
         status = None if self.exit_status is None else self.exit_status()
-        if status is None and reason in (DIED_MID_REQUEST, GONE):  # not known to have exited: it may not have
-            when = " during the request" if reason == DIED_MID_REQUEST else ""
-            why = (" while its process still runs: its link" if self.exit_status is not None else
-                   ": the process died, or its link")
-            reason = (f"its liveliness token went{when}{why} was silent for longer than its {self.lease:g} s lease "
-                      "(cut, or the process stopped)")
+        if status is None and unknown_exit is not None:
+            reason = unknown_exit
         reason = reason if status is None else f"{reason}: {status}"
         pause = _WATCHDOG.long_pause(time.monotonic() - PAUSE_REMEMBERED, LEFT_AFTER * self.lease)
         if pause is not None and pause[0] > self._born and "killed by" not in (status or ""):
