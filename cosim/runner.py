@@ -24,7 +24,7 @@ from cosim.launch import PRIVATE, UNSPECIFIED_HOSTS, Bus, Elsewhere, endpoint_fo
 from cosim.outputs import OutputError, reserve_output, resume_path
 from cosim.progress import Progress
 from cosim.protocol.security import Security
-from cosim.protocol.transport.client import NOT_APPEARED
+from cosim.protocol.transport.client import NOT_APPEARED, RemoteHandle
 from cosim.protocol.transport.session import split_endpoint
 from cosim.results import ResultWriter, diag_path, output_units
 from cosim.resume import Saved, changes, fingerprint, fingerprinted, model_files
@@ -88,16 +88,10 @@ class Session:
             self.log(f"cosim: external subsim {name!r} must attach again; waiting up to {self.external_wait:g} s for "
                      "it (once the old process has exited: two copies answering as one stop the run)\n"
                      + attach_lines(self.bus, self.scenario, name, self.listen, first=False))
-            try:
-                attached = self.bus.attach(name, timeout=self.timeout, wait=self.external_wait)
-                attached.lease = self.scenario.run.lease
-            except SubsimError as exc:  # not '--run and --name' of a first start: the same command, not started
-                if not exc.message.startswith(NOT_APPEARED):
-                    raise
-                raise SubsimError(exc.code, f"it did not attach again within {self.external_wait:g} s (its command "
-                                  "is above; --attach-wait sets how long it is waited for)", name,
-                                  exc.command) from None
-            handle: SubsimHandle = attached
+            # not a first start's '--run and --name': the same command, not started again
+            handle: SubsimHandle = attach(self.bus, self.scenario, name, self.timeout, self.external_wait,
+                                          f"it did not attach again within {self.external_wait:g} s (its command is "
+                                          "above; --attach-wait sets how long it is waited for)")
         elif spec.launcher:
             handle = self._respawn_elsewhere(name)
         else:
@@ -195,16 +189,9 @@ def open_session(
             waited_until = time.monotonic() + external_wait
             for name in external:  # one wait for all of them (a floor each: to attach one that is up already)
                 wait = max(waited_until - time.monotonic(), min(ATTACH_FLOOR, external_wait))
-                try:
-                    attached = bus.attach(name, timeout=timeout, wait=wait)
-                except SubsimError as exc:  # said with the wait the user set, not this one's share of it
-                    if not exc.message.startswith(NOT_APPEARED):
-                        raise
-                    raise SubsimError(exc.code, f"{NOT_APPEARED} {external_wait:g} s (--attach-wait; none serves "
-                                      f"run {bus.run!r} as {name!r}: check its --run and --name)", name,
-                                      exc.command) from None
-                attached.lease = scenario.run.lease  # (its command above carries it)
-                handles[name] = attached
+                handles[name] = attach(bus, scenario, name, timeout, wait,  # said with the wait the user set
+                                       f"{NOT_APPEARED} {external_wait:g} s (--attach-wait; none serves run "
+                                       f"{bus.run!r} as {name!r}: check its --run and --name)")
         for name, spec in scenario.subsims.items():
             try:
                 session.descriptions[name] = handles[name].configure(spec.params, t0=scenario.start)
@@ -231,6 +218,19 @@ ATTACH_FLOOR = 2.0  # s each external subsim is waited for at least, once the ru
 RETRY_ELSEWHERE = 5.0  # s between tries to start a lost subsim on another machine again
 AWAY_FLOOR = 10.0  # s: the shortest automatic deadline when a subsim is on another machine (a Zenoh lease: a
 # network blip shorter than that is waited out, not taken for a hang that costs a restart)
+
+
+def attach(bus: Bus, scenario: Scenario, name: str, timeout: float, wait: float, not_appeared: str) -> RemoteHandle:
+    """A handle to external subsim ``name`` once it is up (within ``wait`` s, else ``not_appeared`` says so), with
+    the lease its printed command gives it."""
+    try:
+        handle = bus.attach(name, timeout=timeout, wait=wait)
+    except SubsimError as exc:
+        if not exc.message.startswith(NOT_APPEARED):
+            raise
+        raise SubsimError(exc.code, not_appeared, name, exc.command) from None
+    handle.lease = scenario.run.lease
+    return handle
 
 
 def attach_lines(bus: Bus, scenario: Scenario, name: str, listen: str | None, first: bool) -> str:
