@@ -17,7 +17,6 @@ dependency (``pip install 'cosim[plot]'``).
 from __future__ import annotations
 
 import argparse
-import csv
 import math
 import re
 import sys
@@ -236,10 +235,8 @@ class _Diagnostics:
 
     def __init__(self, path: Path) -> None:
         try:
-            with open(path, newline="") as f:
-                rows = list(csv.reader(f))
-            header, values = rows[0], np.array(rows[1:], dtype=np.float64).reshape(-1, len(rows[0]))
-        except (OSError, ValueError, IndexError) as exc:
+            header, values = read_results(path)  # (a CSV of numbers under a header, as the results are)
+        except (OSError, ValueError, StopIteration) as exc:
             raise PlotError(f"{path} is not a diagnostics file cosim wrote ({exc})") from None
         self.label, self.columns = path.name, dict(zip(header, values.T))
         if "t1" not in self.columns:
