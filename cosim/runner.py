@@ -24,7 +24,7 @@ from cosim.launch import PRIVATE, UNSPECIFIED_HOSTS, Bus, Elsewhere, endpoint_fo
 from cosim.outputs import OutputError, reserve_output, resume_path
 from cosim.progress import Progress
 from cosim.protocol.security import Security
-from cosim.protocol.transport.client import NOT_APPEARED, RemoteHandle
+from cosim.protocol.transport.client import NOT_APPEARED, NotAppeared, RemoteHandle
 from cosim.protocol.transport.session import split_endpoint
 from cosim.results import ResultWriter, diag_path, output_units
 from cosim.resume import Saved, changes, fingerprint, fingerprinted, model_files
@@ -225,10 +225,8 @@ def attach(bus: Bus, scenario: Scenario, name: str, timeout: float, wait: float,
     the lease its printed command gives it."""
     try:
         handle = bus.attach(name, timeout=timeout, wait=wait)
-    except SubsimError as exc:
-        if not exc.message.startswith(NOT_APPEARED):
-            raise
-        raise SubsimError(exc.code, not_appeared, name, exc.command) from None
+    except NotAppeared as exc:
+        raise NotAppeared(exc.code, not_appeared, name, exc.command) from None
     handle.lease = scenario.run.lease
     return handle
 

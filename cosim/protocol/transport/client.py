@@ -24,6 +24,10 @@ PAUSE_REMEMBERED = 30.0  # s: a pause that ended longer before a death was found
 DIED_MID_REQUEST = "the process died during the request"
 GONE = "the subsim process is gone"
 NOT_APPEARED = "no process appeared within"  # (a wait for a subsim's token ran out)
+
+
+class NotAppeared(SubsimError):
+    """No process served the subsim's name within the wait: it was never started, or under another --run/--name."""
 SILENT_LIMIT = 15.0  # seconds a serving process (its token there, past a cut link's 10 s lease) may leave us unanswered
 # Every queryable on a subsim's key gets its requests (not only the best match): another login holder's queryable
 # declared there as complete would otherwise take them all and black-hole the subsim (its replies are forged anyway).
@@ -226,7 +230,7 @@ class RemoteHandle(SubsimHandle):
         while True:
             if not self._alive.is_set():  # not yet there, or gone again (a cut link outlived its lease)
                 if not self.wait_alive(max(deadline - time.monotonic(), 0.0)):
-                    raise SubsimError("no_responder", f"{NOT_APPEARED} {timeout:g} s (none serves run "
+                    raise NotAppeared("no_responder", f"{NOT_APPEARED} {timeout:g} s (none serves run "
                                                       f"{self.run!r} as {self.name!r}: check its --run and --name)",
                                       self.name, "connect")
                 silent_since = time.monotonic()
