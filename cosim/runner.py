@@ -199,7 +199,9 @@ def open_session(
                 if exc.code not in PARAMS_REFUSED or isinstance(exc, MalformedReply):  # not about its parameters
                     raise
                 trace = f"\nthe model's traceback:\n{exc.traceback.rstrip()}" if exc.traceback else ""
-                raise ScenarioError(f"{scenario.path}: [subsims.{name}.params] {exc.message}{trace}") from None
+                # a ModelError: the model itself cannot run (an FMU that cannot save its state), whatever its params
+                table = f"subsims.{name}" if exc.code == "model_error" else f"subsims.{name}.params"
+                raise ScenarioError(f"{scenario.path}: [{table}] {exc.message}{trace}") from None
         session.plans = {method: build_plan(scenario, session.descriptions, method) for method in scenario.settings}
         signals = {f"{n}.{p}" for n, d in session.descriptions.items() for p in [*d.inputs, *d.outputs]}
         for name in scenario.settings_for().tolerances:
@@ -213,7 +215,7 @@ def open_session(
     return session
 
 
-PARAMS_REFUSED = frozenset({"bad_value", "model_error", "model_exception"})  # configure's errors about its params
+PARAMS_REFUSED = frozenset({"bad_value", "model_error", "model_exception"})  # configure's refusals: the scenario's
 ATTACH_FLOOR = 2.0  # s each external subsim is waited for at least, once the run's wait for them all is over
 RETRY_ELSEWHERE = 5.0  # s between tries to start a lost subsim on another machine again
 AWAY_FLOOR = 10.0  # s: the shortest automatic deadline when a subsim is on another machine (a Zenoh lease: a

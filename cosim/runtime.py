@@ -274,6 +274,11 @@ class Runtime:
             model = self._new_model()
         except Exception as exc:  # the constructor (or the copy of a prototype) of a model that did build once
             raise _model_exception(type(self.model).__qualname__, exc) from None
+        if model.name != self.name:  # the name it is served under (an FMU's instance name, in its messages)
+            try:
+                model.name = self.name
+            except AttributeError:  # a read-only property of the model's own
+                pass
         try:
             resolved = resolve_params(model.params, params)
         except ValueError as exc:

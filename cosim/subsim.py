@@ -124,7 +124,7 @@ class Subsim:
     Class attributes (an instance may replace ``inputs``/``outputs`` in ``initial_state``
     when its ports depend on parameters):
 
-    - ``name``: default instance name on the bus.
+    - ``name``: default instance name on the bus; ``configure`` sets it to the name the subsim is served under.
     - ``inputs``, ``outputs``: ``{port name: Port | size | (size, unit[, doc])}``.
     - ``algebraic``: True when the model has no state (outputs depend on inputs only).
     - ``params``: ``{parameter name: Param(default, unit, doc)}``. Optional; when given, ``configure``

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import ctypes
 import os
+import sys
 import tempfile
 import zipfile
 from dataclasses import dataclass
@@ -32,6 +33,19 @@ except ImportError:  # pragma: no cover - the fmi extra is not installed
 INTERFACES = {"cs": "coSimulation", "me": "modelExchange"}
 REAL_TYPES = {"Real", "Float64", "Float32"}
 INT_TYPES = {"Integer", "Enumeration", "Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32", "Int64", "UInt64"}
+FLOAT32_MAX = 3.4028234663852886e38
+LOG_SHOWN = 20  # distinct warnings of one FMU instance printed; the rest are counted, not shown
+STATUS = {1: "warning", 2: "discard", 3: "error", 4: "fatal", 5: "pending"}
+
+
+def _int_range(fmi_type: str, major: int) -> tuple[int, int]:
+    """The values an FMI integer type holds (FMI 2's Integer and Enumeration are C ints; FMI 3's are sized)."""
+    if fmi_type in {"Integer"} or (fmi_type == "Enumeration" and major == 2):
+        return -2**31, 2**31 - 1
+    if fmi_type == "Enumeration":
+        return -2**63, 2**63 - 1
+    bits = int(fmi_type.removeprefix("U").removeprefix("Int"))
+    return (0, 2**bits - 1) if fmi_type.startswith("U") else (-2**(bits - 1), 2**(bits - 1) - 1)
 
 
 class FmuError(ValueError):
@@ -77,6 +91,8 @@ class FmuInfo:
     settable: dict[str, Variable]  # name -> variable that configure may set (parameters, start values)
     n_states: int
     n_event_indicators: int
+    unused: dict[str, str]  # name -> why cosim neither couples nor sets it (arrays, outputs not real, ...)
+    fixed_step: bool = False  # co-simulation cannot handle a variable communication step size
 
     @property
     def major(self) -> int:
@@ -93,6 +109,8 @@ class FmuInfo:
             "inputs": {v.name: v.unit for v in self.inputs},
             "outputs": {v.name: v.unit for v in self.outputs},
             "parameters": {v.name: v.start for v in self.settable.values()},
+            "fixed_communication_step": self.fixed_step,
+            "not_used": dict(self.unused),
         }
 
 
@@ -134,6 +152,17 @@ def _settable(v: Any, major: int) -> bool:
     return v.start is not None and v.initial in {"exact", "approx"} and v.causality in {"local", "output"}
 
 
+def _unused(v: Any) -> str | None:
+    """Why cosim can neither couple nor set ``v``, or None (a port, a settable variable, or nothing to use)."""
+    if v.dimensions:
+        return f"an array ({v.type} with dimensions): arrays are not supported"
+    if v.causality == "output" and v.type not in REAL_TYPES:
+        return f"a {v.type} output: only real outputs are ports"
+    if v.causality in {"input", "parameter"} and v.type in {"Binary", "Clock"}:
+        return f"a {v.type} {v.causality}: {v.type} variables are not supported"
+    return None
+
+
 def read_fmu(path: str | os.PathLike) -> FmuInfo:
     """Read and check an FMU file: a zip with a valid FMI 2.0/3.0 description and a binary for this platform."""
     require_fmpy()
@@ -169,6 +198,11 @@ def read_fmu(path: str | os.PathLike) -> FmuInfo:
     if not identifiers:
         have = sorted({n.split("/")[1] for n in names if n.startswith("binaries/") and n.count("/") >= 2})
         wanted = ", ".join(f"binaries/{platform}/{i}{ext}" for i in sorted(set(offered.values())))
+        here = sorted(n.rsplit("/", 1)[1] for n in names if n.startswith(f"binaries/{platform}/") and
+                      not n.endswith("/"))
+        if here:  # a binary named other than the modelIdentifier cannot be loaded by FMI's rules
+            raise FmuError(f"{path}: no binary for this platform ({wanted} missing; binaries/{platform}/ holds "
+                           f"{', '.join(here)}: the file must be named after the modelIdentifier)")
         if have:
             raise FmuError(f"{path}: no binary for this platform ({wanted} missing; the FMU has binaries for "
                            f"{', '.join(have)})")
@@ -197,6 +231,8 @@ def read_fmu(path: str | os.PathLike) -> FmuInfo:
         settable=settable,
         n_states=int(md.numberOfContinuousStates or 0),
         n_event_indicators=int(md.numberOfEventIndicators or 0),
+        unused={v.name: why for v in md.modelVariables if (why := _unused(v))},
+        fixed_step="cs" in identifiers and not md.coSimulation.canHandleVariableCommunicationStepSize,
     )
 
 
@@ -233,15 +269,21 @@ def check_binaries(info: FmuInfo) -> None:
 
 # --- values -------------------------------------------------------------------------------------------
 
-def coerce(var: Variable, value: Any) -> Any:
-    """``value`` as the Python type the FMU variable takes; FmuError naming the variable otherwise."""
+def coerce(var: Variable, value: Any, major: int) -> Any:
+    """``value`` as the Python type the FMU variable takes, within its type's range (FMI ``major`` version);
+    FmuError naming the variable otherwise (a value the FMU's type would wrap or overflow, too)."""
     if var.type in REAL_TYPES:
         ok = isinstance(value, (int, float)) and not isinstance(value, bool) and np.isfinite(value)
+        if ok and var.type == "Float32" and abs(value) > FLOAT32_MAX:
+            raise FmuError(f"{var.name} is Float32: {value!r} is beyond its largest finite value, {FLOAT32_MAX:g}")
         if ok:
             return float(value)
         raise FmuError(f"{var.name} is {var.type}: needs a finite number, got {value!r}")
     if var.type in INT_TYPES:
         if isinstance(value, int) and not isinstance(value, bool):
+            low, high = _int_range(var.type, major)
+            if not low <= value <= high:
+                raise FmuError(f"{var.name} is {var.type}: {value!r} is outside its range [{low}, {high}]")
             return value
         raise FmuError(f"{var.name} is {var.type}: needs an integer, got {value!r}")
     if var.type == "Boolean":
@@ -262,7 +304,11 @@ class Instance:
 
     def __init__(self, info: FmuInfo, kind: str, name: str) -> None:
         self.info, self.kind, self.major = info, kind, info.major
-        self.last_message = ""
+        self.name = name
+        self.last_message = ""  # the FMU's latest warning or error logged during the current call
+        self.now: float | None = None  # the time of the step being taken (for the FMU's messages)
+        self._shown: set[str] = set()  # warnings printed (each distinct one once)
+        self.unshown = 0  # warnings not printed: LOG_SHOWN distinct ones were
         self._fmu: Any = None
         unzip = extracted(info)
         cls = {(2, "cs"): fmpy.fmi2.FMU2Slave, (2, "me"): fmpy.fmi2.FMU2Model,
@@ -292,14 +338,32 @@ class Instance:
             raise FmuError(f"{info.path}: cannot instantiate ({self._why(exc)})") from None
         self._ok = True
 
-    # FMU log callbacks: keep the last error/warning for error messages; the FMU's own log is not printed
+    # FMU log callbacks. An error is kept for the message of the call that fails with it; a warning (the call's
+    # result stands) is printed on stderr, each distinct one once per instance, up to LOG_SHOWN of them: an
+    # interval runs several times, and an FMU may warn at every step. Messages with status OK are not shown.
     def _log2(self, env: Any, instance: bytes, status: int, category: bytes, message: bytes) -> None:
-        if status >= 1:
-            self.last_message = message.decode("utf-8", "replace")
+        self._logged(status, category, message)
 
     def _log3(self, env: Any, status: int, category: bytes, message: bytes) -> None:
-        if status >= 1:
-            self.last_message = message.decode("utf-8", "replace")
+        self._logged(status, category, message)
+
+    def _logged(self, status: int, category: bytes | None, message: bytes | None) -> None:
+        if status < 1:
+            return
+        text = " ".join((message or b"").decode("utf-8", "replace").split())
+        self.last_message = text
+        if status != 1:
+            return
+        if text in self._shown or len(self._shown) >= LOG_SHOWN:
+            self.unshown += text not in self._shown
+            return
+        self._shown.add(text)
+        at = "" if self.now is None else f" at t={self.now!r}"
+        kind = (category or b"").decode("utf-8", "replace")
+        full = len(self._shown) == LOG_SHOWN
+        last = f" ({LOG_SHOWN} warnings shown: any more are counted, not shown)" if full else ""
+        print(f"{self.name} ({self.info.path.name}): FMU warning{at}{f' [{kind}]' if kind else ''}: {text}{last}",
+              file=sys.stderr, flush=True)
 
     def _why(self, exc: BaseException) -> str:
         msg = _one_line(exc).rstrip(".")
@@ -309,6 +373,7 @@ class Instance:
         return msg
 
     def call(self, what: str, fn: Any, *args: Any) -> Any:
+        self.last_message = ""  # (a message logged by an earlier call is not this one's cause)
         try:
             return fn(*args)
         except Exception as exc:  # FMPy raises FMICallException for a failed call, Exception for others
@@ -352,6 +417,10 @@ class Instance:
 
     def free(self) -> None:
         fmu, self._fmu = self._fmu, None
+        if self.unshown:
+            print(f"{self.name} ({self.info.path.name}): {self.unshown} more FMU warning(s) not shown",
+                  file=sys.stderr, flush=True)
+            self.unshown = 0
         if fmu is not None:
             try:
                 fmu.terminate()
@@ -413,6 +482,7 @@ class Instance:
 
     # --- co-simulation
     def do_step(self, t: float, h: float) -> None:
+        self.now = t
         if self.major == 2:
             self.call(f"fmi2DoStep at t={t!r}", self._fmu.doStep, t, h, False)
             return

@@ -154,8 +154,8 @@ class FmuSubsim(Subsim):
         if kind not in info.identifiers:
             offered = ", ".join(f"{k!r}" for k in sorted(info.identifiers))
             raise ValueError(f"interface {kind!r} not available in {info.path.name}; it offers {offered}")
-        if not info.can_serialize[kind]:
-            raise ValueError(self._no_state_message(info, kind))
+        if not info.can_serialize[kind]:  # (the FMU, not a parameter, is at fault: not "bad parameter")
+            raise ModelError(self._no_state_message(info, kind))
         self.substeps = self._int(params.get("substeps", 1), "substeps")
         self.solver = params.get("solver", "DOP853")
         if self.solver not in SOLVERS:
@@ -180,19 +180,24 @@ class FmuSubsim(Subsim):
         _free(self._holder)
         try:
             inst = Instance(info, kind, self.name)
-        except FmiCallError as exc:
-            raise ValueError(str(exc)) from None
+        except (FmiCallError, FmuError) as exc:  # its binary would not load or instantiate
+            raise ModelError(str(exc)) from None
         self._holder[0] = inst
         weakref.finalize(self, _free, self._holder)
         try:
             inst.initialize(values, start_time, tolerance)
-            data = inst.serialize()
-        except FmiCallError as exc:
+        except FmiCallError as exc:  # most often a value it refused: its own message says
             _free(self._holder)
             raise ValueError(f"{info.path.name}: initialization failed: {exc}") from None
         except FmuError:
             _free(self._holder)
             raise
+        try:
+            data = inst.serialize()
+        except FmiCallError as exc:  # the FMU, not a parameter: its description promised this
+            _free(self._holder)
+            raise ModelError(f"{info.path.name}: the FMU could not save its state, though its description says it "
+                             f"can: {exc}") from None
         self.capacity = _capacity(len(data), params.get("state_capacity"))
         return encode_state(data, self.capacity)
 
@@ -223,6 +228,9 @@ class FmuSubsim(Subsim):
             what = "is a real input" if len(ports) == 1 else "are real inputs"
             raise ValueError(f"{ports} in {info.path.name} {what}: a port, fed by a coupling or held constant in "
                              f"the scenario's [subsims.<name>.inputs] ({ports[0]} = [value]), not a parameter")
+        unused = sorted(k for k in given if k in info.unused)
+        if unused:
+            raise ValueError(f"{unused[0]} in {info.path.name} is {info.unused[unused[0]]}")
         unknown = sorted(k for k in given if k not in info.settable)
         if unknown:
             known = ", ".join(sorted(info.settable)) or "none"
@@ -230,7 +238,13 @@ class FmuSubsim(Subsim):
             hint = f" (did you mean {', '.join(close)}?)" if close else ""
             raise ValueError(f"unknown FMU variable(s) {unknown} in {info.path.name}{hint}; settable: {known} "
                              f"(subsim settings: {', '.join(sorted(SETTINGS))})")
-        return {k: coerce(info.settable[k], v) for k, v in given.items()}
+        same: dict[int, str] = {}  # value reference -> the name it was given under
+        for k in sorted(given):
+            var = info.settable[k]
+            if (vr := var.vr) in same and info.settable[same[vr]].type == var.type:
+                raise ValueError(f"{same[vr]!r} and {k!r} in {info.path.name} are one variable (aliases): give one")
+            same[vr] = k
+        return {k: coerce(info.settable[k], v, info.major) for k, v in given.items()}
 
     # --- advance ----------------------------------------------------------------------------------
 

@@ -25,7 +25,9 @@ def _needs_gcc() -> None:
 
 @pytest.fixture(scope="session")
 def fmus(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    """``mass2``, ``mass3`` (FMI 2.0 / 3.0, CS + ME, state serialization), ``mass2_nostate``,
+    """``mass2``, ``mass3`` (FMI 2.0 / 3.0, CS + ME, state serialization), ``mass2_warn``, ``mass3_warn`` (every
+    step from t = 0.25 logs a warning), ``mass2_alias`` (x0 is u0), ``mass3_extras`` (variables cosim does not use,
+    and sized integer and Float32 parameters), ``misnamed_binary``, ``mass2_nostate``,
     ``mass3_nostate`` (cannot save state), ``mass3_f32`` (v and F are Float32), ``mass2_step_event`` (model
     exchange asks for event mode at its first integrator step from t = 0.25), and broken ones:
     ``not_zip``, ``no_description``, ``no_binary``, ``other_platform``, ``bad_binary`` (it cannot load),
@@ -36,8 +38,34 @@ def fmus(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     built.update({f"mass{v}_nostate": build_mass.build_mass_fmu(out, v, state=False) for v in (2, 3)})
     built["mass3_f32"] = build_mass.build_mass_fmu(out, 3, float32=True)
     built["mass2_step_event"] = build_mass.build_mass_fmu(out, 2, name="mass2_step_event", step_event_at=0.25)
+    built.update({f"mass{v}_warn": build_mass.build_mass_fmu(out, v, name=f"mass{v}_warn", warn_at=0.25)
+                  for v in (2, 3)})
     so = out / "build-mass2" / "mass.so"
     xml = build_mass.model_description(2)
+    # an alias of u0 (FMI 2: another variable of the same value reference and type)
+    alias = ('<ScalarVariable name="x0" valueReference="5" causality="parameter" variability="fixed" '
+             'initial="exact"><Real unit="m" start="0"/></ScalarVariable>')
+    built["mass2_alias"] = build_mass.write_fmu(out / "mass2_alias.fmu",
+                                                xml.replace("</ModelVariables>", alias + "</ModelVariables>"),
+                                                {build_mass.PLATFORM[2]: so})
+    # FMI 3 variables cosim neither couples nor sets: an array parameter, an array input, an Int32 output
+    extras = ('<Float64 name="gains" valueReference="20" causality="parameter" variability="fixed" start="1 2">'
+              '<Dimension start="2"/></Float64>'
+              '<Float64 name="bias" valueReference="21" causality="input" variability="continuous" start="0 0">'
+              '<Dimension start="2"/></Float64>'
+              '<Int32 name="count" valueReference="22" causality="output" variability="discrete"/>'
+              '<Int32 name="mode" valueReference="23" causality="parameter" variability="fixed" start="0"/>'
+              '<UInt8 name="level" valueReference="24" causality="parameter" variability="fixed" start="0"/>'
+              '<Float32 name="gain32" valueReference="25" causality="parameter" variability="fixed" start="1"/>')
+    xml3 = build_mass.model_description(3).replace("</ModelVariables>", extras + "</ModelVariables>")
+    xml3 = xml3.replace('<Output valueReference="2"/>', '<Output valueReference="2"/><Output valueReference="22"/>')
+    built["mass3_extras"] = build_mass.write_fmu(out / "mass3_extras.fmu", xml3,
+                                                 {build_mass.PLATFORM[3]: out / "build-mass3" / "mass.so"})
+    misnamed = out / "misnamed" / "Mass_Model.so"
+    misnamed.parent.mkdir()
+    shutil.copy(so, misnamed)
+    built["misnamed_binary"] = build_mass.write_fmu(out / "misnamed_binary.fmu", xml,
+                                                    {build_mass.PLATFORM[2]: misnamed})
     (out / "not_zip.fmu").write_bytes(b"this is not a zip archive\n" * 10)
     built["not_zip"] = out / "not_zip.fmu"
     built["no_description"] = build_mass.write_fmu(out / "no_description.fmu", None, {build_mass.PLATFORM[2]: so})

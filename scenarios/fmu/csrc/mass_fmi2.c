@@ -127,12 +127,23 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[], size
 }
 
 /* co-simulation */
+/* Built with MASS_WARN_AT = t >= 0, every step from t on logs a warning and returns fmi2Warning (a valid result). */
+#ifndef MASS_WARN_AT
+#define MASS_WARN_AT -1.0
+#endif
+
 fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean noSetPrior) {
     Instance *inst = c;
+    double warn_at = MASS_WARN_AT;
     (void)noSetPrior;
     if (!(h >= 0.0)) return fail(inst, "negative step");
     inst->d.time = t;
     mass_step(&inst->d, h);
+    if (warn_at >= 0.0 && t >= warn_at) {
+        if (inst->cb.logger) inst->cb.logger(inst->cb.componentEnvironment, inst->name, fmi2Warning, "logStatusWarning",
+                                             "spring beyond its rated stroke");
+        return fmi2Warning;
+    }
     return fmi2OK;
 }
 

@@ -181,10 +181,16 @@ fmi3Status fmi3DeserializeFMUState(fmi3Instance c, const fmi3Byte bytes[], size_
 /* co-simulation */
 fmi3Status fmi3EnterStepMode(fmi3Instance c) { (void)c; return fmi3OK; }
 
+/* Built with MASS_WARN_AT = t >= 0, every step from t on logs a warning and returns fmi3Warning (a valid result). */
+#ifndef MASS_WARN_AT
+#define MASS_WARN_AT -1.0
+#endif
+
 fmi3Status fmi3DoStep(fmi3Instance c, fmi3Float64 t, fmi3Float64 h, fmi3Boolean noSetPrior, fmi3Boolean *eventNeeded,
                       fmi3Boolean *terminate, fmi3Boolean *earlyReturn, fmi3Float64 *lastTime) {
     Instance *inst = c;
     (void)noSetPrior;
+    double warn_at = MASS_WARN_AT;
     if (!(h >= 0.0)) return fail(inst, "negative step");
     inst->d.time = t;
     mass_step(&inst->d, h);
@@ -192,6 +198,10 @@ fmi3Status fmi3DoStep(fmi3Instance c, fmi3Float64 t, fmi3Float64 h, fmi3Boolean 
     *terminate = fmi3False;
     *earlyReturn = fmi3False;
     *lastTime = inst->d.time;
+    if (warn_at >= 0.0 && t >= warn_at) {
+        if (inst->log) inst->log(inst->env, fmi3Warning, "logStatusWarning", "spring beyond its rated stroke");
+        return fmi3Warning;
+    }
     return fmi3OK;
 }
 

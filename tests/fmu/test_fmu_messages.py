@@ -1,0 +1,141 @@
+"""What an FMU says and what it cannot take: its warnings reach the user, values it would wrap are refused, the
+variables cosim does not use are named, and a problem of the FMU is not called a bad parameter."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cosim.contract import CosimError
+from cosim.runtime import Runtime
+from subsims.fmu.fmu import LOG_SHOWN, FmiCallError, FmuError, Instance, Variable, coerce, read_fmu
+from subsims.fmu.subsim import FmuSubsim
+
+T = np.linspace(0.0, 0.4, 5)  # steps at 0, 0.1, 0.2, 0.3: the FMUs warn from t = 0.25 on
+
+
+def _run(path: Path, name: str) -> tuple[Runtime, np.ndarray]:
+    rt = Runtime(FmuSubsim, name=name)
+    rt.configure({"fmu": str(path), "u0": 0.5})
+    out = rt.run_interval(T, {"F": np.zeros((5, 1))})["outputs"]["u"]
+    return rt, out
+
+
+@pytest.mark.parametrize("version", [2, 3])
+def test_an_fmu_warning_is_printed_once_with_its_subsim_time_and_category(
+        fmus: dict[str, Path], version: int, capsys: pytest.CaptureFixture[str]) -> None:
+    _, quiet = _run(fmus[f"mass{version}"], "left")
+    assert capsys.readouterr().err == ""
+    rt, warned = _run(fmus[f"mass{version}_warn"], "left")
+    rt.run_interval(T, {"F": np.zeros((5, 1))})  # the same interval again (a stage): the same warning, not shown again
+    err = capsys.readouterr().err
+    assert err == (f"left (mass{version}_warn.fmu): FMU warning at t=0.30000000000000004 [logStatusWarning]: "
+                   "spring beyond its rated stroke\n")
+    np.testing.assert_array_equal(warned, quiet)  # a warning leaves the step's result standing
+
+
+def test_distinct_warnings_beyond_the_limit_are_counted_and_the_count_said_at_the_end(
+        fmus: dict[str, Path], capsys: pytest.CaptureFixture[str]) -> None:
+    rt, _ = _run(fmus["mass2"], "m")
+    inst: Instance = rt.model._holder[0]
+    for i in range(LOG_SHOWN + 5):
+        inst._log2(None, b"m", 1, b"logStatusWarning", f"warning {i}".encode())
+    inst._log2(None, b"m", 0, b"logAll", b"an OK message is not shown")
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == LOG_SHOWN and err[0].endswith(": warning 0")
+    assert err[-1].endswith(f"warning {LOG_SHOWN - 1} ({LOG_SHOWN} warnings shown: any more are counted, not shown)")
+    inst.free()
+    assert capsys.readouterr().err == "m (mass2.fmu): 5 more FMU warning(s) not shown\n"
+
+
+def test_a_failed_call_does_not_quote_a_message_logged_by_an_earlier_call(fmus: dict[str, Path]) -> None:
+    rt, _ = _run(fmus["mass2_warn"], "m")
+    inst: Instance = rt.model._holder[0]
+    inst.do_step(0.3, 0.1)
+    assert inst.last_message == "spring beyond its rated stroke"  # logged by that step
+
+    def fails() -> None:
+        raise RuntimeError("boom")
+
+    with pytest.raises(FmiCallError) as err:
+        inst.call("fmi2Something", fails)
+    assert str(err.value) == "fmi2Something: boom"
+
+
+@pytest.mark.parametrize(
+    ("fmi_type", "value", "phrase"),
+    [
+        ("Float32", 1e39, "x is Float32: 1e+39 is beyond its largest finite value, 3.40282e+38"),
+        ("Int32", 2**31, "x is Int32: 2147483648 is outside its range [-2147483648, 2147483647]"),
+        ("Int32", -2**31 - 1, "x is Int32: -2147483649 is outside its range"),
+        ("UInt8", -1, "x is UInt8: -1 is outside its range [0, 255]"),
+        ("UInt8", 256, "x is UInt8: 256 is outside its range [0, 255]"),
+        ("Int64", 2**63, "x is Int64: 9223372036854775808 is outside its range"),
+        ("Integer", 2**31, "x is Integer: 2147483648 is outside its range [-2147483648, 2147483647]"),
+    ],
+)
+def test_a_value_the_fmu_type_would_wrap_or_overflow_is_refused(fmi_type: str, value: object, phrase: str) -> None:
+    var = Variable("x", 1, fmi_type, "parameter", "fixed", "exact", "0", "", "")
+    with pytest.raises(FmuError) as err:
+        coerce(var, value, 2 if fmi_type == "Integer" else 3)
+    assert str(err.value) == phrase or str(err.value).startswith(phrase)
+
+
+@pytest.mark.parametrize(("fmi_type", "value"), [("Float32", 3.4e38), ("Int32", 2**31 - 1), ("Int32", -2**31),
+                                                 ("UInt8", 255), ("UInt64", 2**64 - 1), ("Int64", -2**63)])
+def test_values_at_the_ends_of_a_type_range_pass(fmi_type: str, value: object) -> None:
+    var = Variable("x", 1, fmi_type, "parameter", "fixed", "exact", "0", "", "")
+    assert coerce(var, value, 3) == value
+
+
+def test_out_of_range_values_are_refused_at_configure_naming_the_variable(fmus: dict[str, Path]) -> None:
+    for params, phrase in [({"mode": 2**31}, "mode is Int32: 2147483648 is outside its range"),
+                           ({"level": 300}, "level is UInt8: 300 is outside its range [0, 255]"),
+                           ({"gain32": 1e40}, "gain32 is Float32: 1e+40 is beyond its largest finite value")]:
+        rt = Runtime(FmuSubsim)
+        with pytest.raises(CosimError) as err:
+            rt.configure({"fmu": str(fmus["mass3_extras"]), **params})
+        assert err.value.code == "bad_value" and phrase in err.value.message, err.value.message
+        assert rt.state is None
+
+
+def test_variables_cosim_does_not_use_are_listed_and_named_when_given(fmus: dict[str, Path]) -> None:
+    info = read_fmu(fmus["mass3_extras"])
+    assert info.summary()["not_used"] == {
+        "gains": "an array (Float64 with dimensions): arrays are not supported",
+        "bias": "an array (Float64 with dimensions): arrays are not supported",
+        "count": "a Int32 output: only real outputs are ports",
+    }
+    assert [v.name for v in info.inputs] == ["F"] and [v.name for v in info.outputs] == ["u", "v"]
+    with pytest.raises(CosimError) as err:
+        Runtime(FmuSubsim).configure({"fmu": str(fmus["mass3_extras"]), "gains": [2.0, 0.0]})
+    assert err.value.message == ("configure: bad parameter: gains in mass3_extras.fmu is an array (Float64 with "
+                                 "dimensions): arrays are not supported")
+
+
+def test_an_alias_and_its_variable_given_together_are_refused(fmus: dict[str, Path]) -> None:
+    rt = Runtime(FmuSubsim)
+    rt.configure({"fmu": str(fmus["mass2_alias"]), "x0": 0.25})  # the alias alone sets u0
+    assert rt.run_interval(T[:2], {"F": np.zeros((2, 1))})["outputs"]["u"][0, 0] == 0.25
+    with pytest.raises(CosimError) as err:
+        rt.configure({"fmu": str(fmus["mass2_alias"]), "u0": 0.5, "x0": 0.25})
+    assert "'u0' and 'x0' in mass2_alias.fmu are one variable (aliases): give one" in err.value.message
+
+
+def test_a_binary_not_named_after_the_model_identifier_is_named(fmus: dict[str, Path]) -> None:
+    with pytest.raises(FmuError) as err:
+        read_fmu(fmus["misnamed_binary"])
+    assert "binaries/linux64/mass.so missing; binaries/linux64/ holds Mass_Model.so: the file must be named after " \
+           "the modelIdentifier" in str(err.value)
+
+
+def test_an_fmu_that_cannot_save_its_state_is_not_called_a_bad_parameter(fmus: dict[str, Path]) -> None:
+    with pytest.raises(CosimError) as err:
+        Runtime(FmuSubsim).configure({"fmu": str(fmus["mass2_nostate"])})
+    assert err.value.code == "model_error" and "bad parameter" not in err.value.message
+    with pytest.raises(CosimError) as err:  # its binary cannot load: the FMU's fault too
+        Runtime(FmuSubsim).configure({"fmu": str(fmus["bad_binary"])})
+    assert err.value.code == "model_error" and err.value.message.startswith("configure: ") \
+        and "cannot load the binary" in err.value.message
