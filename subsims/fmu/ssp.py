@@ -182,7 +182,8 @@ def read_ssp(path: str | Path) -> dict[str, Any]:
         connections = _child(system, "Connections")
         for conn in _children(connections, "Connection") if connections is not None else []:
             ends = [conn.get(a) for a in ("startElement", "startConnector", "endElement", "endConnector")]
-            text = f"{ends[0]}.{ends[1]} -> {ends[2]}.{ends[3]}"
+            system_name = system.get("name") or "(unnamed)"  # the end a system-level connector belongs to
+            text = f"{ends[0] or system_name}.{ends[1]} -> {ends[2] or system_name}.{ends[3]}"
             if not ends[0] or not ends[2]:
                 raise ScenarioError(f"{path}: connection {text}: system-level connectors are not supported")
             coupling: dict[str, Any] = {"to": f"{ends[2]}.{ends[3]}", "from": f"{ends[0]}.{ends[1]}"}

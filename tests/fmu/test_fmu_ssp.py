@@ -132,7 +132,7 @@ def test_cosim_run_ssp_gives_the_same_run_as_the_toml_scenario(
         ("no_ssd", "not an SSP file (no SystemStructure.ssd in the archive)"),
         ("not_fmu", "component 'mass1': only FMU components are supported"),
         ("missing_fmu", "component 'mass1': its FMU 'resources/other.fmu' is not in the archive"),
-        ("system_connector", "connection None.u -> mass1.F: system-level connectors are not supported"),
+        ("system_connector", "connection top.u -> mass1.F: system-level connectors are not supported"),
         ("no_stop", "no stop time: give DefaultExperiment stopTime in the SSD or stop = ... in system.toml"),
         ("bad_companion", "system.toml: [subsims.mass9] is not a component of system.ssp"),
         ("no_interval", "no coupling interval: give [coupling] interval = ... (and samples) in system.toml beside it"),
