@@ -3,7 +3,7 @@ scenario TOML parses to, so ``cosim.scenario.parse`` checks them like any scenar
 
 ``read_ssp("system.ssp")`` reads ``SystemStructure.ssd`` from the SSP archive (System Structure and
 Parameterization 1.0/2.0): every FMU component becomes a subsim (its FMU extracted to a directory that
-lives as long as this process), every
+lives as long as this process; its ``implementation`` chooses the subsim's ``interface``), every
 connection a coupling (a ``LinearTransformation`` and a conversion between the units of its ends become
 the ``linear`` transform), parameter bindings (inline or ``.ssv`` files in the archive) become params,
 each value given with a ``unit`` converted to its FMU variable's unit, and ``DefaultExperiment`` gives
@@ -13,7 +13,7 @@ parameter set's ``Units``, or the FMU's ``UnitDefinitions``. A companion ``syste
 interval, samples, tol ..., ``[tolerances]``, ``[output]``) and per-subsim params
 (``[subsims.<name>.params]``).
 Not supported (refused with the element named): nested systems, system-level connectors, signal
-dictionaries, components that are not FMUs, transformations other than linear ones,
+dictionaries, components that are not FMUs, transformations other than linear ones, parameter mappings,
 units that cannot be converted (not defined, or of different dimensions) where a conversion is needed.
 """
 
@@ -37,6 +37,7 @@ MODEL = "subsims.fmu:FmuSubsim"
 FMU_TYPES = {"application/x-fmu-sharedlibrary", None}
 LAYOUT_ONLY = {"ConnectionGeometry", "Annotations"}  # children of a Connection that carry no coupling
 COMPANION_KEYS = {"name", "description", "start", "stop", "coupling", "tolerances", "output", "subsims"}
+IMPLEMENTATIONS = {"any": None, "CoSimulation": "cs", "ModelExchange": "me"}  # -> the FMU subsim's interface
 REAL_KINDS = {"Real", "Float64", "Float32"}
 
 
@@ -113,10 +114,11 @@ def _value(param: ET.Element, where: str) -> tuple[Any, str | None]:
 @dataclass
 class _Model:
     """What the import needs of a component's FMU (its modelDescription.xml): the unit of each variable
-    ('' for none) and the units it defines."""
+    ('' for none), the units it defines, and the interfaces it describes (CoSimulation, ModelExchange)."""
 
     units: dict[str, str] = field(default_factory=dict)
     defined: dict[str, Unit] = field(default_factory=dict)
+    interfaces: set[str] = field(default_factory=set)
 
 
 def _read_model(data: bytes) -> _Model | None:
@@ -130,7 +132,7 @@ def _read_model(data: bytes) -> _Model | None:
     for typedef in _inner(root, "TypeDefinitions"):
         typed = typedef[0] if _local(typedef.tag) == "SimpleType" and len(typedef) else typedef
         declared[typedef.get("name", "")] = typed.get("unit", "")
-    model = _Model()
+    model = _Model(interfaces={_local(c.tag) for c in root} & {"CoSimulation", "ModelExchange"})
     for var in _inner(root, "ModelVariables"):
         typed = var[0] if _local(var.tag) == "ScalarVariable" and len(var) else var
         model.units[var.get("name", "")] = typed.get("unit") or declared.get(typed.get("declaredType", ""), "")
@@ -145,6 +147,11 @@ def _parameters(binding: ET.Element, zf: zipfile.ZipFile, where: str, model: _Mo
                 ssd_units: dict[str, Unit]) -> dict[str, Any]:
     """The binding's values by FMU variable name, each converted from the unit it is given in to its variable's."""
     source = binding.get("source")
+    mapping = _child(binding, "ParameterMapping")
+    if mapping is not None:  # renaming (and transforming) values: not implemented, and ignoring it sets wrong ones
+        given = f" {mapping.get('source')!r}" if mapping.get("source") else ""
+        raise ScenarioError(f"{where}: parameter binding {source or '(inline)'}: its ParameterMapping{given} is not "
+                            "supported; name the parameters as the FMU's variables in the parameter set instead")
     if source is not None:
         if source.startswith("#"):
             raise ScenarioError(f"{where}: parameter binding references ({source!r}) are not supported")
@@ -208,6 +215,17 @@ class _End:
 def _connector_unit(connector: ET.Element) -> str | None:
     typed = next((t for t in connector if _local(t.tag) in REAL_KINDS), None)
     return typed.get("unit") if typed is not None else None
+
+
+def _interface(comp: ET.Element, model: _Model | None, where: str, source: str) -> str | None:
+    """The FMU subsim's ``interface`` for the component's ``implementation`` (None: the subsim's default)."""
+    implementation = comp.get("implementation", "any")
+    if implementation not in IMPLEMENTATIONS:
+        raise ScenarioError(f"{where}: implementation {implementation!r} is not one of {sorted(IMPLEMENTATIONS)}")
+    if model is not None and IMPLEMENTATIONS[implementation] is not None and implementation not in model.interfaces:
+        offered = " and ".join(sorted(model.interfaces)) or "no interface"
+        raise ScenarioError(f"{where}: implementation {implementation!r}, but its FMU {source!r} offers {offered}")
+    return IMPLEMENTATIONS[implementation]
 
 
 def _coupling(conn: ET.Element, ends: dict[str, _End], ssd_units: dict[str, Unit], where: str,
@@ -299,6 +317,9 @@ def read_ssp(path: str | Path) -> dict[str, Any]:
                     except ValueError:
                         raise ScenarioError(f"{path}: DefaultExperiment {attr} is not a number") from None
         system_name = system.get("name") or "(unnamed)"
+        if _child(system, "SignalDictionaries") is not None:  # its entries' units and types would go unread
+            raise ScenarioError(f"{path}: system {system_name!r}: signal dictionaries (SignalDictionaries) are not "
+                                "supported; connect the components' connectors directly")
         try:
             ssd_units = unit_table(_child(root, "Units"))
         except ValueError as exc:
@@ -333,6 +354,9 @@ def read_ssp(path: str | Path) -> dict[str, Any]:
             params: dict[str, Any] = {}
             for binding in (b for b in _inner(comp, "ParameterBindings") if _local(b.tag) == "ParameterBinding"):
                 params.update(_parameters(binding, zf, where, model, ssd_units))
+            interface = _interface(comp, model, where, source)
+            if interface is not None:  # before the companion's params, which override it
+                params["interface"] = interface
             params["fmu"] = str(fmu)
             raw["subsims"][name] = {"model": MODEL, "params": params}
             ends[name] = _End(model, {c.get("name", ""): _connector_unit(c) for c in _inner(comp, "Connectors")})
