@@ -3,32 +3,42 @@ scenario TOML parses to, so ``cosim.scenario.parse`` checks them like any scenar
 
 ``read_ssp("system.ssp")`` reads ``SystemStructure.ssd`` from the SSP archive (System Structure and
 Parameterization 1.0/2.0): every FMU component becomes a subsim (its FMU extracted to a directory that
-lives as long as this process), every connection a coupling (a ``LinearTransformation`` becomes the
-``linear`` transform), parameter bindings (inline or ``.ssv`` files in the archive) become params, and
-``DefaultExperiment`` gives start and stop. A companion ``system.toml`` beside ``system.ssp`` may add or
-override the top-level scenario tables (``stop``, ``[coupling]`` with method, interval, samples, tol ...,
-``[tolerances]``, ``[output]``) and per-subsim params (``[subsims.<name>.params]``).
+lives as long as this process; its ``implementation`` chooses the subsim's ``interface``), every
+connection a coupling (a ``LinearTransformation`` and a conversion between the units of its ends become
+the ``linear`` transform), parameter bindings (inline or ``.ssv`` files in the archive) become params,
+each value given with a ``unit`` converted to its FMU variable's unit, and ``DefaultExperiment`` gives
+start and stop. Units are defined as in SSP and FMI (``Unit`` with ``BaseUnit``): in the SSD's or the
+parameter set's ``Units``, or the FMU's ``UnitDefinitions``. A companion ``system.toml`` beside
+``system.ssp`` may add or override the top-level scenario tables (``stop``, ``[coupling]`` with method,
+interval, samples, tol ..., ``[tolerances]``, ``[output]``) and per-subsim params
+(``[subsims.<name>.params]``).
 Not supported (refused with the element named): nested systems, system-level connectors, signal
-dictionaries, components that are not FMUs, transformations other than linear ones.
+dictionaries, components that are not FMUs, transformations other than linear ones, parameter mappings,
+units that cannot be converted (not defined, or of different dimensions) where a conversion is needed.
 """
 
 from __future__ import annotations
 
+import io
 import tempfile
 import tomllib
 import xml.etree.ElementTree as ET
 import zipfile
 from collections.abc import Mapping
+from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath
 from typing import Any
 
 from cosim.scenario import ScenarioError, check_subsim_name
 from subsims.fmu.scratch import process_dir
+from subsims.fmu.ssp_units import IDENTITY, Affine, Unit, compose, conversion, convert_value, unit_table
 
 MODEL = "subsims.fmu:FmuSubsim"
 FMU_TYPES = {"application/x-fmu-sharedlibrary", None}
 LAYOUT_ONLY = {"ConnectionGeometry", "Annotations"}  # children of a Connection that carry no coupling
 COMPANION_KEYS = {"name", "description", "start", "stop", "coupling", "tolerances", "output", "subsims"}
+IMPLEMENTATIONS = {"any": None, "CoSimulation": "cs", "ModelExchange": "me"}  # -> the FMU subsim's interface
+REAL_KINDS = {"Real", "Float64", "Float32"}
 
 
 def expand_fmu(spec: Mapping[str, Any], scenario: Path, start: float, key: str) -> dict[str, Any]:
@@ -69,33 +79,79 @@ def _child(elem: ET.Element, name: str) -> ET.Element | None:
     return found[0] if found else None
 
 
+def _inner(elem: ET.Element, name: str) -> list[ET.Element]:
+    """The children of ``elem``'s child ``name`` (none if it has no such child)."""
+    found = _child(elem, name)
+    return list(found) if found is not None else []
+
+
 def _extract_dir() -> Path:
     return Path(tempfile.mkdtemp(dir=process_dir("cosim-ssp-")))
 
 
-def _value(param: ET.Element, where: str) -> Any:
+def _value(param: ET.Element, where: str) -> tuple[Any, str | None]:
+    """The parameter's value and the unit it is given in (a Real's ``unit``; None: the variable's own)."""
     for typed in param:
         kind, raw = _local(typed.tag), typed.get("value")
         if raw is None:
             continue
         try:
-            if kind in {"Real", "Float64", "Float32"}:
-                return float(raw)
+            if kind in REAL_KINDS:
+                return float(raw), typed.get("unit") or None
             if kind in {"Integer", "Enumeration"} or kind.startswith(("Int", "UInt")):
-                return int(raw)
+                return int(raw), None
             if kind == "Boolean":
                 if raw not in {"true", "false", "1", "0"}:
                     raise ValueError(raw)
-                return raw in {"true", "1"}
+                return raw in {"true", "1"}, None
             if kind == "String":
-                return raw
+                return raw, None
         except ValueError:
             raise ScenarioError(f"{where}: parameter {param.get('name')!r}: bad {kind} value {raw!r}") from None
     raise ScenarioError(f"{where}: parameter {param.get('name')!r} has no Real/Integer/Boolean/String value")
 
 
-def _parameters(binding: ET.Element, zf: zipfile.ZipFile, where: str) -> dict[str, Any]:
+@dataclass
+class _Model:
+    """What the import needs of a component's FMU (its modelDescription.xml): the unit of each variable
+    ('' for none), the units it defines, and the interfaces it describes (CoSimulation, ModelExchange)."""
+
+    units: dict[str, str] = field(default_factory=dict)
+    defined: dict[str, Unit] = field(default_factory=dict)
+    interfaces: set[str] = field(default_factory=set)
+
+
+def _read_model(data: bytes) -> _Model | None:
+    """The FMU's :class:`_Model`; None when it cannot be read (the subsim's configure says why, in its words)."""
+    try:
+        with zipfile.ZipFile(io.BytesIO(data)) as fmu:
+            root = ET.fromstring(fmu.read("modelDescription.xml"))
+    except (zipfile.BadZipFile, KeyError, ET.ParseError):
+        return None
+    declared = {}  # type name -> unit; FMI 2 wraps the type (SimpleType/Real), FMI 3 does not (Float64Type)
+    for typedef in _inner(root, "TypeDefinitions"):
+        typed = typedef[0] if _local(typedef.tag) == "SimpleType" and len(typedef) else typedef
+        declared[typedef.get("name", "")] = typed.get("unit", "")
+    model = _Model(interfaces={_local(c.tag) for c in root} & {"CoSimulation", "ModelExchange"})
+    for var in _inner(root, "ModelVariables"):
+        typed = var[0] if _local(var.tag) == "ScalarVariable" and len(var) else var
+        model.units[var.get("name", "")] = typed.get("unit") or declared.get(typed.get("declaredType", ""), "")
+    try:
+        model.defined = unit_table(_child(root, "UnitDefinitions"))
+    except ValueError:
+        return None  # a broken description: configure refuses the FMU
+    return model
+
+
+def _parameters(binding: ET.Element, zf: zipfile.ZipFile, where: str, model: _Model | None,
+                ssd_units: dict[str, Unit]) -> dict[str, Any]:
+    """The binding's values by FMU variable name, each converted from the unit it is given in to its variable's."""
     source = binding.get("source")
+    mapping = _child(binding, "ParameterMapping")
+    if mapping is not None:  # renaming (and transforming) values: not implemented, and ignoring it sets wrong ones
+        given = f" {mapping.get('source')!r}" if mapping.get("source") else ""
+        raise ScenarioError(f"{where}: parameter binding {source or '(inline)'}: its ParameterMapping{given} is not "
+                            "supported; name the parameters as the FMU's variables in the parameter set instead")
     if source is not None:
         if source.startswith("#"):
             raise ScenarioError(f"{where}: parameter binding references ({source!r}) are not supported")
@@ -110,6 +166,10 @@ def _parameters(binding: ET.Element, zf: zipfile.ZipFile, where: str) -> dict[st
         root = _child(values, "ParameterSet") if values is not None else None
         if root is None:
             return {}
+    try:
+        own_units = unit_table(_child(root, "Units"))
+    except ValueError as exc:
+        raise ScenarioError(f"{where}: parameter set {source or '(inline)'}: {exc}") from None
     prefix = binding.get("prefix", "")
     out = {}
     for params in _children(root, "Parameters"):
@@ -117,8 +177,117 @@ def _parameters(binding: ET.Element, zf: zipfile.ZipFile, where: str) -> dict[st
             name = param.get("name", "")
             if prefix and name.startswith(prefix):
                 name = name[len(prefix):]
-            out[name] = _value(param, where)
+            value, unit = _value(param, where)
+            if unit is not None and model is not None and name in model.units:
+                value = _in_variable_unit(value, unit, name, model, [own_units, ssd_units], where)
+            out[name] = value
     return out
+
+
+def _in_variable_unit(value: float, unit: str, name: str, model: _Model, units: list[dict[str, Unit]],
+                      where: str) -> float:
+    """SSP: a value with a unit is in that unit, the FMU takes it in its variable's."""
+    target = model.units[name]
+    if not target:
+        raise ScenarioError(f"{where}: parameter {name!r} is given in {unit!r} but FMU variable {name!r} declares "
+                            "no unit: give the value in the unit the FMU expects, without a unit attribute")
+    try:  # the parameter's unit is defined in its parameter set or the SSD (else the FMU), the variable's in the FMU
+        return convert_value(value, unit, target, [*units, model.defined], [model.defined, *units[1:]])
+    except ValueError as exc:
+        raise ScenarioError(f"{where}: parameter {name!r} is given in {unit!r} and FMU variable {name!r} is in "
+                            f"{target!r}: cannot convert, {exc}") from None
+
+
+@dataclass
+class _End:
+    """A component as a connection's end: its FMU's :class:`_Model` (None: unreadable) and the units its SSD
+    connectors declare (None: the FMU variable's)."""
+
+    model: _Model | None
+    connectors: dict[str, str | None]
+
+    def units(self, connector: str) -> tuple[str, str]:
+        """(the FMU variable's unit, the connector's unit), '' where none is known."""
+        fmu = self.model.units.get(connector, "") if self.model is not None else ""
+        return fmu, self.connectors.get(connector) or fmu
+
+
+def _connector_unit(connector: ET.Element) -> str | None:
+    typed = next((t for t in connector if _local(t.tag) in REAL_KINDS), None)
+    return typed.get("unit") if typed is not None else None
+
+
+def _interface(comp: ET.Element, model: _Model | None, where: str, source: str) -> str | None:
+    """The FMU subsim's ``interface`` for the component's ``implementation`` (None: the subsim's default)."""
+    implementation = comp.get("implementation", "any")
+    if implementation not in IMPLEMENTATIONS:
+        raise ScenarioError(f"{where}: implementation {implementation!r} is not one of {sorted(IMPLEMENTATIONS)}")
+    if model is not None and IMPLEMENTATIONS[implementation] is not None and implementation not in model.interfaces:
+        offered = " and ".join(sorted(model.interfaces)) or "no interface"
+        raise ScenarioError(f"{where}: implementation {implementation!r}, but its FMU {source!r} offers {offered}")
+    return IMPLEMENTATIONS[implementation]
+
+
+def _coupling(conn: ET.Element, ends: dict[str, _End], ssd_units: dict[str, Unit], where: str,
+              system: str) -> dict[str, Any]:
+    """The coupling of a connection: from the start FMU's output to the end FMU's input, through each unit on the
+    way (FMU variable, connector, connector, FMU variable) and the LinearTransformation, which SSP applies to the
+    value already converted to the end connector's unit (before it unless suppressUnitConversion)."""
+    names = [conn.get(a) for a in ("startElement", "startConnector", "endElement", "endConnector")]
+    text = f"{names[0] or system}.{names[1]} -> {names[2] or system}.{names[3]}"
+    if not names[0] or not names[2]:
+        raise ScenarioError(f"{where} {text}: system-level connectors are not supported")
+    coupling: dict[str, Any] = {"to": f"{names[2]}.{names[3]}", "from": f"{names[0]}.{names[1]}"}
+    linear: Affine | None = None
+    for transform in conn:
+        if _local(transform.tag) in LAYOUT_ONLY:  # where an editor drew the line: nothing to couple
+            continue
+        if _local(transform.tag) != "LinearTransformation":
+            raise ScenarioError(f"{where} {text}: {_local(transform.tag)} is not supported")
+        try:
+            linear = float(transform.get("factor", 1.0)), float(transform.get("offset", 0.0))
+        except ValueError:
+            raise ScenarioError(f"{where} {text}: bad LinearTransformation") from None
+    suppress = conn.get("suppressUnitConversion", "false") in {"true", "1"}
+    start, end = ends.get(names[0]), ends.get(names[2])
+    out_fmu, out_conn = start.units(names[1]) if start is not None else ("", "")
+    in_fmu, in_conn = end.units(names[3]) if end is not None else ("", "")
+    out_defs = [start.model.defined] if start is not None and start.model is not None else []
+    in_defs = [end.model.defined] if end is not None and end.model is not None else []
+    chain = _between(out_fmu, out_conn, [*out_defs, ssd_units], [ssd_units, *out_defs], True,
+                     f"{where} {text}: connector {names[0]}.{names[1]}")
+    if out_conn and in_conn and not suppress:
+        try:
+            chain = compose(chain, conversion(out_conn, in_conn, [ssd_units, *out_defs], [ssd_units, *in_defs]))
+        except ValueError as exc:
+            if linear is None:  # nothing says how one becomes the other; with a transformation, it does
+                raise ScenarioError(f"{where} {text}: the output is in {out_conn!r} and the input in {in_conn!r}: "
+                                    f"cannot convert, {exc}; connect ports of one quantity, or give the connection "
+                                    "a LinearTransformation that maps one to the other") from None
+    if linear is not None:
+        chain = compose(chain, linear)
+    chain = compose(chain, _between(in_fmu, in_conn, [*in_defs, ssd_units], [ssd_units, *in_defs], False,
+                                    f"{where} {text}: connector {names[2]}.{names[3]}"))
+    # an identity coupling keeps the run's unit check; one the SSP asks not to convert is the user's word
+    differ = suppress and bool(out_conn) and bool(in_conn) and out_conn != in_conn
+    if linear is not None or chain != IDENTITY or differ:
+        coupling.update(transform="linear", params={"gains": [chain[0]], "offset": chain[1]})
+    return coupling
+
+
+def _between(variable: str, connector: str, variable_units: list[dict[str, Unit]],
+             connector_units: list[dict[str, Unit]], outward: bool, where: str) -> Affine:
+    """An FMU variable's value in its connector's unit (``outward``: an output) or the reverse (an input), when the
+    SSD declares the connector in another unit than the FMU's."""
+    if not variable or not connector:
+        return IDENTITY
+    try:
+        if outward:
+            return conversion(variable, connector, variable_units, connector_units)
+        return conversion(connector, variable, connector_units, variable_units)
+    except ValueError as exc:
+        raise ScenarioError(f"{where}: the connector is declared in {connector!r} and its FMU variable is in "
+                            f"{variable!r}: cannot convert, {exc}") from None
 
 
 def read_ssp(path: str | Path) -> dict[str, Any]:
@@ -147,9 +316,17 @@ def read_ssp(path: str | Path) -> dict[str, Any]:
                         raw[key] = float(experiment.get(attr))
                     except ValueError:
                         raise ScenarioError(f"{path}: DefaultExperiment {attr} is not a number") from None
+        system_name = system.get("name") or "(unnamed)"
+        if _child(system, "SignalDictionaries") is not None:  # its entries' units and types would go unread
+            raise ScenarioError(f"{path}: system {system_name!r}: signal dictionaries (SignalDictionaries) are not "
+                                "supported; connect the components' connectors directly")
+        try:
+            ssd_units = unit_table(_child(root, "Units"))
+        except ValueError as exc:
+            raise ScenarioError(f"{path}: SystemStructure.ssd Units: {exc}") from None
         target = _extract_dir()
-        elements = _child(system, "Elements")
-        for comp in list(elements) if elements is not None else []:
+        ends: dict[str, _End] = {}
+        for comp in _inner(system, "Elements"):
             kind = _local(comp.tag)
             name = comp.get("name", "")
             where = f"{path}: component {name!r}"
@@ -173,30 +350,18 @@ def read_ssp(path: str | Path) -> dict[str, Any]:
             fmu = target / name / PurePosixPath(member).name
             fmu.parent.mkdir(parents=True, exist_ok=True)
             fmu.write_bytes(data)
+            model = _read_model(data)
             params: dict[str, Any] = {}
-            bindings = _child(comp, "ParameterBindings")
-            for binding in _children(bindings, "ParameterBinding") if bindings is not None else []:
-                params.update(_parameters(binding, zf, where))
+            for binding in (b for b in _inner(comp, "ParameterBindings") if _local(b.tag) == "ParameterBinding"):
+                params.update(_parameters(binding, zf, where, model, ssd_units))
+            interface = _interface(comp, model, where, source)
+            if interface is not None:  # before the companion's params, which override it
+                params["interface"] = interface
             params["fmu"] = str(fmu)
             raw["subsims"][name] = {"model": MODEL, "params": params}
-        connections = _child(system, "Connections")
-        for conn in _children(connections, "Connection") if connections is not None else []:
-            ends = [conn.get(a) for a in ("startElement", "startConnector", "endElement", "endConnector")]
-            text = f"{ends[0]}.{ends[1]} -> {ends[2]}.{ends[3]}"
-            if not ends[0] or not ends[2]:
-                raise ScenarioError(f"{path}: connection {text}: system-level connectors are not supported")
-            coupling: dict[str, Any] = {"to": f"{ends[2]}.{ends[3]}", "from": f"{ends[0]}.{ends[1]}"}
-            for transform in conn:
-                if _local(transform.tag) in LAYOUT_ONLY:  # where an editor drew the line: nothing to couple
-                    continue
-                if _local(transform.tag) != "LinearTransformation":
-                    raise ScenarioError(f"{path}: connection {text}: {_local(transform.tag)} is not supported")
-                try:
-                    factor, offset = float(transform.get("factor", 1.0)), float(transform.get("offset", 0.0))
-                except ValueError:
-                    raise ScenarioError(f"{path}: connection {text}: bad LinearTransformation") from None
-                coupling.update(transform="linear", params={"gains": [factor], "offset": offset})
-            raw["couplings"].append(coupling)
+            ends[name] = _End(model, {c.get("name", ""): _connector_unit(c) for c in _inner(comp, "Connectors")})
+        for conn in (c for c in _inner(system, "Connections") if _local(c.tag) == "Connection"):
+            raw["couplings"].append(_coupling(conn, ends, ssd_units, f"{path}: connection", system_name))
     if not raw["subsims"]:
         raise ScenarioError(f"{path}: the system has no FMU components")
     raw = _with_companion(raw, path)

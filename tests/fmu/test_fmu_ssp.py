@@ -25,6 +25,7 @@ K = 20 * np.pi**2
 SSD = "http://ssp-standard.org/SSP1/SystemStructureDescription"
 SSC = "http://ssp-standard.org/SSP1/SystemStructureCommon"
 SSV = "http://ssp-standard.org/SSP1/SystemStructureParameterValues"
+SSM = "http://ssp-standard.org/SSP1/SystemStructureParameterMapping"
 
 
 def parameter_set(values: dict[str, float]) -> str:
@@ -132,7 +133,14 @@ def test_cosim_run_ssp_gives_the_same_run_as_the_toml_scenario(
         ("no_ssd", "not an SSP file (no SystemStructure.ssd in the archive)"),
         ("not_fmu", "component 'mass1': only FMU components are supported"),
         ("missing_fmu", "component 'mass1': its FMU 'resources/other.fmu' is not in the archive"),
-        ("system_connector", "connection None.u -> mass1.F: system-level connectors are not supported"),
+        ("system_connector", "connection top.u -> mass1.F: system-level connectors are not supported"),
+        ("signal_dictionary", "system 'top': signal dictionaries (SignalDictionaries) are not supported"),
+        ("mapping_inline", "component 'mass1': parameter binding resources/m.ssv: its ParameterMapping is not "
+                           "supported; name the parameters as the FMU's variables in the parameter set instead"),
+        ("mapping_file", "component 'mass1': parameter binding (inline): its ParameterMapping 'resources/m.ssm' is "
+                         "not supported"),
+        ("bad_implementation", "component 'mass1': implementation 'Both' is not one of ['CoSimulation', "
+                               "'ModelExchange', 'any']"),
         ("no_stop", "no stop time: give DefaultExperiment stopTime in the SSD or stop = ... in system.toml"),
         ("bad_companion", "system.toml: [subsims.mass9] is not a component of system.ssp"),
         ("no_interval", "no coupling interval: give [coupling] interval = ... (and samples) in system.toml beside it"),
@@ -143,6 +151,11 @@ def test_a_bad_ssp_is_one_clear_line(
     tmp_path: Path, fmus: dict[str, Path], capsys: pytest.CaptureFixture, case: str, phrase: str
 ) -> None:
     plain = component("mass1", "")
+    ssm = '<ssm:ParameterMapping version="1.0"><ssm:MappingEntry source="mass" target="m"/></ssm:ParameterMapping>'
+    inline = (f"<ssd:ParameterBinding><ssd:ParameterValues>{parameter_set({'k': K})}</ssd:ParameterValues>"
+              '<ssd:ParameterMapping source="resources/m.ssm"/></ssd:ParameterBinding>')
+    dictionary = ('<ssd:SignalDictionaries><ssd:SignalDictionary name="sigs"><ssd:DictionaryEntry name="s1">'
+                  "<ssc:Real/></ssd:DictionaryEntry></ssd:SignalDictionary></ssd:SignalDictionaries>")
     text = {
         "no_ssd": None,
         "not_fmu": ssd(component("mass1", "", kind="application/x-ssp-package", source="resources/x.ssp"), ""),
@@ -152,8 +165,18 @@ def test_a_bad_ssp_is_one_clear_line(
         "bad_companion": ssd(plain, ""),
         "no_interval": ssd(plain, ""),
         "missing_ssv": ssd(component("mass1", '<ssd:ParameterBinding source="resources/nope.ssv"/>'), ""),
+        "signal_dictionary": ssd(plain, "").replace("</ssd:Connections>", "</ssd:Connections>" + dictionary),
+        "mapping_inline": ssd(component("mass1", '<ssd:ParameterBinding source="resources/m.ssv"><ssd:ParameterMapping>'
+                                                 f'<ssm:ParameterMapping xmlns:ssm="{SSM}" version="1.0">'
+                                                 '<ssm:MappingEntry source="mass" target="m"/></ssm:ParameterMapping>'
+                                                 "</ssd:ParameterMapping></ssd:ParameterBinding>"), ""),
+        "mapping_file": ssd(component("mass1", inline), ""),
+        "bad_implementation": ssd(component("mass1", "").replace("<ssd:Component ",
+                                                                 '<ssd:Component implementation="Both" '), ""),
     }[case]
-    ssp = write_ssp(tmp_path / "system.ssp", text, fmus["mass2"])
+    files = {"resources/m.ssv": parameter_set({"mass": 2.0}), "resources/m.ssm": ssm.replace(
+        "<ssm:ParameterMapping ", f'<ssm:ParameterMapping xmlns:ssm="{SSM}" ')}
+    ssp = write_ssp(tmp_path / "system.ssp", text, fmus["mass2"], files)
     if case == "bad_companion":
         (tmp_path / "system.toml").write_text("[subsims.mass9.params]\nm = 2.0\n")
     with pytest.raises(ScenarioError) as err:
@@ -213,3 +236,41 @@ def test_the_companions_start_reaches_every_fmu(tmp_path: Path, fmus: dict[str, 
     (tmp_path / "late.toml").write_text("start = 0.0\n" + COMPANION)
     raw = read_ssp(ssp)
     assert raw["start"] == 0.0 and "start_time" not in raw["subsims"]["mass1"]["params"]
+
+
+@pytest.mark.parametrize(
+    ("implementation", "companion", "interface"),
+    [("ModelExchange", "", "me"), ("CoSimulation", "", "cs"), ("any", "", None), (None, "", None),
+     ("ModelExchange", '[subsims.mass1.params]\ninterface = "cs"\n', "cs")],
+)
+def test_a_components_implementation_chooses_the_fmu_interface(
+    tmp_path: Path, fmus: dict[str, Path], implementation: str | None, companion: str, interface: str | None
+) -> None:
+    """SSP: implementation="ModelExchange"/"CoSimulation" must be used (it was ignored: the subsim took
+    co-simulation); "any" or none leaves the subsim its default; the companion TOML has the last word."""
+    text = ssd(component("mass1", ""), "")
+    if implementation is not None:
+        text = text.replace("<ssd:Component ", f'<ssd:Component implementation="{implementation}" ')
+    ssp = write_ssp(tmp_path / "system.ssp", text, fmus["mass2"])
+    (tmp_path / "system.toml").write_text(COMPANION + companion)
+    assert read_ssp(ssp)["subsims"]["mass1"]["params"].get("interface") == interface
+    assert load(ssp).subsims["mass1"].params.get("interface") == interface
+
+
+def test_an_implementation_the_fmu_does_not_have_is_refused(tmp_path: Path, fmus: dict[str, Path]) -> None:
+    """SSP: 'It is an error if the specified type of FMU implementation is not present in the FMU'."""
+    with zipfile.ZipFile(fmus["mass2"]) as zf:
+        members = {n: zf.read(n) for n in zf.namelist()}
+    xml = members["modelDescription.xml"].decode()
+    start = xml.index("<ModelExchange ")
+    members["modelDescription.xml"] = (xml[:start] + xml[xml.index("/>", start) + 2:]).encode()
+    cs_only = tmp_path / "cs_only.fmu"
+    with zipfile.ZipFile(cs_only, "w") as zf:
+        for name, data in members.items():
+            zf.writestr(name, data)
+    text = ssd(component("mass1", "").replace("<ssd:Component ", '<ssd:Component implementation="ModelExchange" '), "")
+    ssp = write_ssp(tmp_path / "system.ssp", text, cs_only)
+    with pytest.raises(ScenarioError) as err:
+        read_ssp(ssp)
+    assert str(err.value) == (f"{ssp}: component 'mass1': implementation 'ModelExchange', but its FMU "
+                              "'resources/mass.fmu' offers CoSimulation")
