@@ -127,6 +127,12 @@ def _run_until_done(args: argparse.Namespace, state: dict) -> int:
             f"; a round trip took {1e3 * s.round_trip_median:.2g} ms (median)"  # the link's cost (and the work)
         print(f"requests: {s.requests / s.intervals:.2f} an interval, sent in {s.round_trips / s.intervals:.2f} "
               f"round trips{per_second}{took}")
+    if s.rejected:  # tries rolled back and run again shorter: their cost is in the wall time, not the histogram
+        print(f"rejected: {s.rejected} tries, retried shorter ({s.unconverged} not converged, "
+              f"{s.rejected - s.unconverged} over interval_tol), {s.rejected_stages} stages run in them")
+    if s.over_tol:
+        print(f"over interval_tol: {s.over_tol} intervals, accepted at interval_min (their error column in the "
+              "diagnostics says by how much)")
     for r in report.extra.get("restarts", []):
         print(f"restart: {r.subsim} {r.reason}; " + (f"restored to t = {r.at:g}" if r.restored else
                                                       "the replacement failed while being restored"))

@@ -27,6 +27,7 @@ from cosim.coupler.couplings import Coupling, check_units
 from cosim.coupler.plan import Plan
 from cosim.coupler.relaxation import (
     Commit,
+    Diverged,
     Done,
     Interval,
     Outputs,
@@ -306,12 +307,18 @@ class Coordinator:
         restarts_before = len(self.restarts)
         reply: Outputs | None = None
         retry = False
+        diverged: Diverged | None = None
         while True:
             try:
-                action = steps.throw(RetryInterval()) if retry else steps.send(reply)
+                if diverged is not None:  # the machine retries shorter (interval = "auto"), or it comes back out
+                    action = steps.throw(diverged)
+                else:
+                    action = steps.throw(RetryInterval()) if retry else steps.send(reply)
             except StopIteration as stop:
                 return stop.value
-            reply, retry = None, False
+            except Diverged as unhandled:
+                raise unhandled.error from None
+            reply, retry, diverged = None, False, None
             if isinstance(action, Run):
                 try:
                     reply = self._run(action)
@@ -322,8 +329,10 @@ class Coordinator:
                             ("not finite" in exc.message or "NaN or inf" in exc.message):  # (the runtime's words)
                         exc.add_note(f"it was at stage {action.stage} of the interval [{action.times[0]:g}, "
                                      f"{action.times[-1]:g}], on inputs the coupling iteration made: if that iteration "
-                                     "diverged (values growing stage by stage), a shorter [coupling] interval is the "
-                                     "cure")
+                                     "diverged (values growing stage by stage), a shorter [coupling] interval "
+                                     "(interval_min with interval = \"auto\") is the cure")
+                        diverged = Diverged(exc, action.stage)
+                        continue
                     raise
             elif isinstance(action, StageDone):
                 if self.on_stage is not None:

@@ -227,7 +227,8 @@ def plot_files(paths: Sequence[Path], out: Path, signals: Sequence[str] | None =
 
 
 DIAGNOSTICS = (("stages", "stages"), ("length_s", "interval length (s)"), ("error", "error / interval_tol"),
-               ("largest_residual", "largest residual"), ("wall_time_s", "wall time (s)"))  # columns drawn
+               ("halvings", "tries rolled back"), ("largest_residual", "largest residual"),
+               ("wall_time_s", "wall time (s)"))  # columns drawn (the rolled-back tries: where the wall time went)
 
 
 class _Diagnostics:

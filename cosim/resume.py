@@ -13,6 +13,7 @@ from __future__ import annotations
 import hashlib
 import io
 import json
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -109,7 +110,8 @@ def save(path: Path, saved: Saved) -> None:
     for key, m in saved.point.magnitudes.items():
         arrays[f"magnitude/{key}"] = m
     meta = {"format": FORMAT, "fingerprint": saved.fingerprint, "t_start": saved.t_start, "t": saved.point.t,
-            "length": saved.point.length,
+            "length": saved.point.length, "patience": saved.point.patience,
+            "ceiling": None if math.isinf(saved.point.ceiling) else saved.point.ceiling,
             "subsims": {name: {"time": st.time, "model": st.model} for name, st in saved.states.items()},
             "written": saved.written, "models": saved.models, "scenario": saved.scenario}
     arrays["meta"] = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
@@ -140,7 +142,9 @@ def load(path: Path) -> Saved:
         why = " ".join(str(exc).split())[:120]
         raise OutputError(f"{path} is damaged or not a resume point ({type(exc).__name__}: {why}): run it again "
                           "from the start with --overwrite") from None
-    point = ResumePoint(float(meta["t"]), meta["length"], previous, magnitudes)
+    ceiling = meta.get("ceiling")  # (absent from points saved before it was kept)
+    point = ResumePoint(float(meta["t"]), meta["length"], previous, magnitudes,
+                        math.inf if ceiling is None else float(ceiling), int(meta.get("patience", 0)))
     return Saved(meta["fingerprint"], float(meta["t_start"]), point, states, meta.get("written"), meta.get("models"),
                  meta.get("scenario"))
 

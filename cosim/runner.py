@@ -6,6 +6,7 @@ The I/O shell around the coupler: scenario in, processes up, :class:`~cosim.driv
 from __future__ import annotations
 
 import json
+import math
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
@@ -17,7 +18,7 @@ from cosim.console import say
 from cosim.contract import MalformedReply, SubsimError
 from cosim.coupler.couplings import CouplingError, SignalRef
 from cosim.coupler.plan import Plan
-from cosim.coupler.relaxation import Interval, RunSummary
+from cosim.coupler.relaxation import Interval, RunSummary, Settings
 from cosim.driver import Coordinator, Deadline, Recovery, plan_for
 from cosim.handles import Description, InProcessHandle, SubsimHandle
 from cosim.launch import PRIVATE, UNSPECIFIED_HOSTS, Bus, Elsewhere, endpoint_for
@@ -215,6 +216,24 @@ def open_session(
     return session
 
 
+RESOLVED = 64  # a sample spacing must be at least this many units in the last place of the run's latest time
+
+
+def check_resolution(scenario: Scenario, settings: Settings, method: str, stop: float) -> None:
+    """ScenarioError unless the run's samples are spaced far enough apart for doubles to tell its times apart up to
+    ``stop`` (far from t = 0 a double's resolution is coarse: 1.2e-4 s at 1e12 s)."""
+    key = "interval_min" if settings.auto is not None else "interval"
+    shortest = settings.auto.minimum if settings.auto is not None else settings.interval
+    spacing = shortest / (settings.samples - 1)
+    latest = max(abs(scenario.start), abs(stop))
+    ulp = math.ulp(latest)
+    if spacing < RESOLVED * ulp:
+        raise ScenarioError(f"{scenario.path}: [coupling.{method}] {key} {shortest:g} s over {settings.samples} "
+                            f"samples spaces them {spacing:.3g} s apart, too fine for the times of this run: near t = "
+                            f"{latest:.6g} s a double resolves {ulp:.3g} s; keep the spacing above "
+                            f"{RESOLVED * ulp:.3g} s, or count time from nearer 0 (start)")
+
+
 PARAMS_REFUSED = frozenset({"bad_value", "model_error", "model_exception"})  # configure's refusals: the scenario's
 ATTACH_FLOOR = 2.0  # s each external subsim is waited for at least, once the run's wait for them all is over
 RETRY_ELSEWHERE = 5.0  # s between tries to start a lost subsim on another machine again
@@ -388,6 +407,7 @@ def run_scenario(
     method = method or scenario.default_method
     settings = scenario.settings_for(method)
     stop = scenario.stop if stop is None else stop
+    check_resolution(scenario, settings, method, stop)
     output = Path(output) if output is not None else default_output(scenario, method)
     lock = reserve_output(output, overwrite or resume) if record else None  # locked before anything is launched
     key = fingerprint(scenario.raw, method)  # what a resume point of this run is saved under

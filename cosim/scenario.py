@@ -93,9 +93,10 @@ KEYS: dict[str, dict[str, Key]] = {
         "interval_min": Key("number", "interval_initial / 1024", "s",
                             "interval = 'auto': shortest interval; one that does not converge at it stops the run"),
         "interval_max": Key("number", "interval_initial * 1024", "s", "interval = 'auto': longest interval"),
-        "interval_stages": Key("integer", "3", "",
+        "interval_stages": Key("integer", "3 distributed, 4 centralized", "",
                                "interval = 'auto': stages per interval aimed at; the interval grows while "
-                               "intervals converge in fewer, holds at this many, shrinks above"),
+                               "intervals converge in fewer, holds at this many, shrinks above (Jacobi needs "
+                               "a stage more than Gauss-Seidel)"),
         "samples": Key("integer", "5", "", "samples per interval, both ends included (the paper's ndp)"),
         "first_guess": Key("string", '"extrapolate"', "", "stage-0 inputs: 'zero', 'hold' or 'extrapolate'"),
         "interp": Key("string", '"linear"', "", "input interpolation: 'linear', 'cubic' or 'lagrange'"),
@@ -147,6 +148,8 @@ KEYS["coupling.<method>"] = {k: v for k, v in KEYS["coupling"].items() if k != "
 INTERVAL_REQUIRED = ("is required: the convergence interval in s, short against the fastest coupled dynamics (a tenth "
                      "of the shortest period is a start; a run converges at any length, but the signals between "
                      "samples are only interpolated), or interval = \"auto\" to have each one sized to interval_tol")
+AUTO_STAGES = {"distributed": 3, "centralized": 4}  # interval_stages' default: a Jacobi stage passes on one coupling
+# per stage, so it converges a stage later than Gauss-Seidel (3 stages where Gauss-Seidel takes 2)
 AUTO_KEYS = ("interval_tol", "interval_initial", "interval_min", "interval_max", "interval_stages")
 TABLES = {"coupling", "subsims", "couplings", "tolerances", "output", "unified", "run", "security"}
 
@@ -459,7 +462,7 @@ class _Parser:
         merged = dict(table)
         try:
             tol = Tolerance(merged.pop("tol", 1e-10), merged.pop("res", 1e-12))
-            merged.update(self.auto_interval(merged, where))
+            merged.update(self.auto_interval(merged, where, method))
             order = merged.get("order")
             if order is not None:
                 merged["order"] = check_order(order, list(subsims))
@@ -469,7 +472,7 @@ class _Parser:
         except (ValueError, TypeError) as exc:
             raise self.fail(where, str(exc)) from None
 
-    def auto_interval(self, merged: dict[str, Any], where: str) -> dict[str, Any]:
+    def auto_interval(self, merged: dict[str, Any], where: str, method: str) -> dict[str, Any]:
         """Pops the interval_* keys from ``merged``; with interval = "auto" returns interval and auto."""
         keys = {k: merged.pop(k) for k in AUTO_KEYS if k in merged}
         if merged.get("interval") != "auto":
@@ -483,7 +486,7 @@ class _Parser:
         control = IntervalControl(tol=float(keys.get("interval_tol", 1e-8)), initial=initial,
                                   minimum=float(keys.get("interval_min", initial / 1024)),
                                   maximum=float(keys.get("interval_max", initial * 1024)),
-                                  stages=keys.get("interval_stages", 3))
+                                  stages=keys.get("interval_stages", AUTO_STAGES[method]))
         return {"interval": control.initial, "auto": control}
 
     def output(self, table: Mapping[str, Any]) -> tuple[Path | None, tuple[str, ...] | None]:

@@ -282,3 +282,129 @@ def test_the_cubic_first_guess_extrapolates_the_whole_segments_last_piece() -> N
     whole = Segment(t, v).interpolant("cubic")
     guess = first_guess("extrapolate", new, {"s.u": 2}, {"s.u": (t, v)}, "cubic")["s.u"]
     np.testing.assert_array_equal(guess, np.array([whole(x) for x in new]))
+
+
+# --- a diverging iteration, and not growing back into it -------------------------------------------------------
+
+
+def _tries(steps, answer, commits: int) -> tuple[list, list]:
+    """Drive ``steps`` to its ``commits``-th Commit more (and stop there: a later call goes on after it): every try's
+    (length, stages run, accepted) and the committed intervals."""
+    tries, done, stages, action = [], [], 0, steps.send(None)
+    while True:
+        if isinstance(action, Run):
+            stages += 1
+        elif isinstance(action, (Rollback, Commit)):
+            length = action.t1 - action.t0 if isinstance(action, Rollback) else action.interval.length
+            tries.append((length, stages, isinstance(action, Commit)))
+            stages = 0
+            if isinstance(action, Commit):
+                done.append(action.interval)
+                if len(done) == commits:
+                    return tries, done
+        action = steps.send(answer(action) if isinstance(action, Run) else None)
+
+
+def _decay(action: Run) -> dict:
+    return {"y": {"y": integrate_exactly(1.0, action.times, action.inputs["y"]["u"][:, 0])[:, None]}}
+
+
+def test_a_diverging_try_is_given_up_after_a_few_stages_not_max_stages() -> None:
+    """y' = -20 y over 1 s: the Picard iterates' residuals grow like 20^k / k! up to stage 20. With max_stages = 40
+    the try used to run all 40 stages (and a stronger coupling overflowed on the way, ending the run)."""
+    settings = auto(initial=1.0, tol=1.0, stages=12)
+    settings = Settings(**{**settings.__dict__, "max_stages": 40})
+    tries, _ = _tries(Relaxation(feedback_loop(-20.0), settings).run(0.0, 2.0), _decay, 1)
+    assert tries[0][0] == 1.0 and not tries[0][2]  # rejected
+    assert tries[0][1] <= 6, tries  # stages run before it was given up (40 without the divergence test)
+
+
+def test_after_a_try_that_did_not_converge_the_next_intervals_stay_below_its_length() -> None:
+    settings = auto(initial=1.0, tol=1.0, stages=12)
+    tries, done = _tries(Relaxation(feedback_loop(-20.0), settings).run(0.0, 50.0), _decay, 20)
+    failed = min(length for length, _, ok in tries if not ok)
+    first_ok = next(i for i, (_, _, ok) in enumerate(tries) if ok)
+    later = tries[first_ok:first_ok + 17]  # the patience: 16 intervals after the last failure
+    assert all(ok for _, _, ok in later), later  # no length it failed at is tried again meanwhile
+    assert all(length <= 0.75 * failed for length, _, _ in later)
+    assert max(length for length, _, _ in later) > done[0].length  # it still grows below that ceiling
+
+
+def _stiff_pair(method: str) -> object:
+    """The shipped oscillator with a middle spring 1000 times the outer ones (k12 = 4000 pi^2), interval = "auto"
+    from 0.1 s: far too long for that coupling (modes 2 pi and 281 rad/s)."""
+    sc = load(ROOT / "scenarios" / "oscillator.toml")
+    raw = dict(sc.raw)
+    k1, k12 = 4 * np.pi**2, 4000 * np.pi**2
+    raw["coupling"] = {"method": method, "interval": "auto", "samples": 5, "interp": "cubic", "tol": 1e-10,
+                       "res": 1e-12}
+    raw["subsims"] = {k: {**v, "params": {**v["params"], "k": k1 + k12}} for k, v in raw["subsims"].items()}
+    raw["couplings"] = [{**c, "params": {"k": k12}} for c in raw["couplings"]]
+    return parse(raw, sc.path), np.sqrt(k1), np.sqrt(k1 + 2 * k12)
+
+
+def test_a_stage_made_non_finite_by_a_diverging_iteration_is_retried_shorter(tmp_path: Path,
+                                                                            monkeypatch: pytest.MonkeyPatch) -> None:
+    """Gauss-Seidel on the stiff pair overflowed at stage 73 of its first 0.1 s try and the run stopped ("output
+    'u' is not finite"). The divergence test is off here (it gives such tries up first): the non-finite run alone
+    must be rolled back and retried shorter, and the run meet the closed form."""
+    import cosim.coupler.relaxation as relaxation
+
+    monkeypatch.setattr(relaxation, "DIVERGED", float("inf"))
+    scenario, w_slow, w_fast = _stiff_pair("distributed")
+    done = run_scenario(scenario, stop=0.2, output=tmp_path / "s.csv", inprocess=True, progress=False,
+                        log=lambda m: None)
+    assert done.summary.unconverged >= 1 and done.summary.t_end == 0.2
+    _, data = read_results(tmp_path / "s.csv")
+    t = data[:, 0]
+    u1 = 0.5 * (np.cos(w_slow * t) + np.cos(w_fast * t))
+    assert np.abs(data[:, 1] - u1).max() < 1e-6
+
+
+def test_a_resumed_run_keeps_the_ceiling_a_failed_try_set(tmp_path: Path) -> None:
+    """The ceiling and its patience are part of the resume point (saved and loaded): a run resumed just after a
+    failed try goes on with the lengths the uninterrupted run took, not growing back into the failing one."""
+    from cosim.handles import SubsimState
+    from cosim.resume import Saved
+    from cosim.resume import load as load_point
+    from cosim.resume import save as save_point
+
+    committed: dict[float, float] = {0.0: 1.0}
+
+    def answer(action: Run) -> dict:
+        y = integrate_exactly(committed[float(action.times[0])], action.times, action.inputs["y"]["u"][:, 0])
+        committed[float(action.times[-1])] = float(y[-1])
+        return {"y": {"y": y[:, None]}}
+
+    settings = auto(initial=1.0, tol=1.0, stages=12)
+    whole = Relaxation(feedback_loop(-20.0), settings)
+    steps = whole.run(0.0, 50.0)
+    _, first = _tries(steps, answer, 2)
+    point = whole.resume_point
+    assert point is not None and point.patience > 0 and np.isfinite(point.ceiling)
+    path = tmp_path / "p.npz"
+    save_point(path, Saved("f", 0.0, point, {"y": SubsimState(point.t, np.zeros(1), "m")}))
+    loaded = load_point(path).point
+    assert (loaded.ceiling, loaded.patience) == (point.ceiling, point.patience)
+    _, rest = _tries(steps, answer, 20)
+    resumed = Relaxation(feedback_loop(-20.0), settings).run(0.0, 50.0, resume=loaded)
+    _, again = _tries(resumed, answer, 20)
+    assert [iv.length for iv in again] == [iv.length for iv in rest]
+
+
+def test_samples_finer_than_a_double_resolves_at_the_runs_times_are_refused_before_anything_runs(
+        tmp_path: Path) -> None:
+    """start = 1e12 s: near it doubles are 1.2e-4 s apart; the controller once shrank the spacing below that and the
+    run stopped mid-way with 't must be strictly increasing'. Refused at the start, naming the key and the figures."""
+    from cosim.runner import check_resolution
+
+    sc = load(ROOT / "scenarios" / "oscillator.toml")
+    raw = {**sc.raw, "start": 1e12, "stop": 1e12 + 1.0, "coupling": {**sc.raw["coupling"], "interval": "auto"}}
+    far = parse(raw, sc.path)
+    with pytest.raises(ScenarioError) as err:
+        run_scenario(far, stop=far.stop, output=tmp_path / "o.csv", inprocess=True, progress=False, log=lambda m: None)
+    assert ("[coupling.distributed] interval_min 9.76563e-05 s over 5 samples spaces them 2.44e-05 s apart, too fine "
+            "for the times of this run: near t = 1e+12 s a double resolves 0.000122 s") in str(err.value)
+    assert not (tmp_path / "o.csv").exists()
+    near = parse({**raw, "start": 1e9, "stop": 1e9 + 1.0}, sc.path)  # 1.2e-7 s there: 2.44e-5 s is resolved
+    check_resolution(near, near.settings_for("distributed"), "distributed", near.stop)

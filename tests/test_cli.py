@@ -298,3 +298,27 @@ def test_what_a_model_prints_is_on_stderr_under_its_subsims_name(tmp_path: Path)
     for name in ("a", "b"):
         assert lines.count(f"{name}: advancing to 0.10") >= 1 and f"{name}: in parts" in lines, done.stderr
         assert f"{name}: bytes from 2" in lines and f"{name}: {'.' * 20000}" in lines, done.stderr
+
+
+def test_the_summary_counts_the_rejected_tries_and_the_intervals_over_interval_tol(tmp_path: Path) -> None:
+    """An automatic run on a coupling too stiff for its first intervals: its tries rolled back and those accepted
+    above interval_tol at interval_min were in the diagnostics only; the summary says how many (the same counts)."""
+    text = OSCILLATOR.read_text()
+    text = text.replace("interval = 0.05          # H, seconds", 'interval = "auto"').replace("max_stages = 50", "")
+    text = text.replace("k = 197.39208802178717", "k = 39517.89602196179")  # k1 + k12, k12 = 4000 pi^2
+    text = text.replace("k = 157.91367041742973", "k = 39478.41760435743")
+    (tmp_path / "stiff.toml").write_text(text)
+    out = tmp_path / "s.csv"
+    done = subprocess.run([*COSIM, "run", str(tmp_path / "stiff.toml"), "--inprocess", "--quiet", "--stop", "0.2",
+                           "--output", str(out)], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    cols, diag = read_results(Path(str(out) + ".diag.csv"))
+    rejected = int(diag[:, cols.index("halvings")].sum())
+    over = int((diag[:, cols.index("error")] > 1.0).sum())
+    found = re.search(r"^rejected: (\d+) tries, retried shorter \((\d+) not converged, (\d+) over interval_tol\), "
+                      r"(\d+) stages run in them$", done.stdout, re.M)
+    assert found, done.stdout
+    tries, unconverged, over_tol, stages = map(int, found.groups())
+    assert tries == rejected > 0 and unconverged + over_tol == tries and unconverged >= 1  # 0.1 s diverges
+    assert stages >= 2 * tries  # every try ran a check: two stages at least
+    assert f"over interval_tol: {over} intervals, accepted at interval_min" in done.stdout and over > 0

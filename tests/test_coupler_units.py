@@ -91,9 +91,9 @@ def test_check_uses_per_signal_tolerances_and_names_failures() -> None:
 
 @pytest.mark.parametrize("bad", [-1.0, -5e-324, math.nan, math.inf, "1e-3", True, None])
 def test_tolerance_rejects_bad_values(bad) -> None:
-    with pytest.raises(ValueError, match=r"^tolerance rel must be a finite number >= 0, got "):
+    with pytest.raises(ValueError, match=r"^tol \(Tolerance.rel\) must be a finite number >= 0, got "):
         Tolerance(bad, 0.0)
-    with pytest.raises(ValueError, match=r"^tolerance abs must be a finite number >= 0, got "):
+    with pytest.raises(ValueError, match=r"^res \(Tolerance.abs\) must be a finite number >= 0, got "):
         Tolerance(0.0, bad)
 
 

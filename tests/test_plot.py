@@ -280,11 +280,12 @@ def test_a_diagnostics_file_given_alone_is_plotted(tmp_path: Path, capsys: pytes
     assert Path(printed).name == "diagnostics.png"
     assert_real_png(Path(printed))
     shown = drawn["diagnostics.png"]
-    assert shown["ylabels"] == ["stages", "interval length (s)", "error / interval_tol", "largest residual",
-                                "wall time (s)"]
+    assert shown["ylabels"] == ["stages", "interval length (s)", "error / interval_tol", "tries rolled back",
+                                "largest residual", "wall time (s)"]
     (label, t, stages), = shown["lines"][0]
     assert label == "a.csv.diag.csv" and list(t) == [0.4, 1.2] and list(stages) == [3.0, 2.0]
     assert list(shown["lines"][2][0][2]) == [0.25, 0.5]
+    assert list(shown["lines"][3][0][2]) == [0.0, 1.0]  # the second interval's rolled-back try
     (tmp_path / "x.diag.csv").write_text("not,a\ndiagnostics,file\n")
     assert cosim_main(["plot", str(tmp_path / "x.diag.csv"), "--out", str(tmp_path / "png")]) == 2
     assert "is not a diagnostics file cosim wrote" in capsys.readouterr().err

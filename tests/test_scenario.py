@@ -55,7 +55,7 @@ def test_good_scenario_loads_with_per_method_settings(tmp_path: Path) -> None:
     [
         ('to = "b.u"', 'to = "c.u"', "couplings[1]", "unknown subsim 'c'"),
         ('from = ["a.y"]', 'from = "a"', "couplings[1]", "subsim.port"),
-        ("tol = 1e-12", "tol = -1.0", "coupling.centralized", "tolerance rel"),
+        ("tol = 1e-12", "tol = -1.0", "coupling.centralized", "tol (Tolerance.rel) must be a finite number >= 0"),
         ("samples = 5", "samples = 1", "coupling", "samples"),
         ('method = "distributed"', 'method = "jacobi"', "coupling.method", "jacobi"),
         ("interval = 0.1", "interval = 0.1\nspeed = 3", "coupling", "unknown key(s) ['speed']"),

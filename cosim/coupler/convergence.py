@@ -28,7 +28,8 @@ class Tolerance:
         for name in ("rel", "abs"):
             v = getattr(self, name)
             if not isinstance(v, (int, float)) or isinstance(v, bool) or not np.isfinite(v) or v < 0:
-                raise ValueError(f"tolerance {name} must be a finite number >= 0, got {v!r}")
+                key = "tol" if name == "rel" else "res"  # (as a scenario names them)
+                raise ValueError(f"{key} (Tolerance.{name}) must be a finite number >= 0, got {v!r}")
 
 
 @dataclass(frozen=True)

@@ -53,6 +53,8 @@ from cosim.signals import SCHEMES, check_scheme
 
 METHODS = ("centralized", "distributed")
 RETRY_MISSED = 32  # interval tries after a speculation missed before it is tried again at that level and stage
+CEILING_PATIENCE = 16  # interval = "auto": intervals after a try that did not converge that stay below its length
+CEILING_MARGIN = 0.75  # ... below it by this factor at least
 
 Outputs = dict[str, dict[str, np.ndarray]]  # subsim -> port -> samples (n, size)
 Evaluations = tuple[tuple[str, Coupling, int], ...]  # couplings with their targets' "subsim.port" and width
@@ -145,6 +147,8 @@ class ResumePoint:
     length: float | None
     previous: dict[str, tuple[np.ndarray, np.ndarray]]
     magnitudes: dict[str, np.ndarray]
+    ceiling: float = math.inf  # interval = "auto": lengths below it only, for ``patience`` more intervals
+    patience: int = 0
 
 
 @dataclass
@@ -161,6 +165,9 @@ class RunSummary:
     round_trips: int = 0  # Run actions, rejected tries included (the subsims of one Run answer concurrently)
     requests: int = 0  # subsim runs, rejected tries included
     round_trip_median: float | None = None  # s from a Run's requests to its last reply (recent ones; by the driver)
+    unconverged: int = 0  # of the rejected tries: those that did not converge (or diverged), not over interval_tol
+    rejected_stages: int = 0  # stages the rejected tries ran
+    over_tol: int = 0  # interval = "auto": intervals accepted at interval_min above interval_tol
 
     def add(self, interval: Interval) -> None:
         self.t_end = float(interval.t[-1])
@@ -204,6 +211,30 @@ def _trend(r: Sequence[float]) -> str:
     k = min(4, max(2, len(r) // 2))
     recent, before = max(r[-k:]), max(r[-2 * k:-k])
     return "growing" if recent > 1.2 * before else "falling" if recent < 0.7 * before else "stalled"
+
+
+class Diverged(Exception):
+    """Thrown into a running stream by a driver whose run at stage 1 or later failed on a value the coupling
+    iteration made non-finite (``error``, a subsim's error). With ``interval = "auto"`` (or ``max_halvings``) the
+    try is rolled back and retried shorter, as one that did not converge; otherwise it comes back out."""
+
+    def __init__(self, error: BaseException, stage: int) -> None:
+        super().__init__(str(error))
+        self.error, self.stage = error, stage
+
+
+DIVERGED = 100.0  # interval = "auto": a residual growing past this many times its first ones gives the try up
+
+
+def _diverging(history: Mapping[str, list[float]], failing: Sequence[str]) -> bool:
+    """Whether a failing signal's residuals grow (:func:`_trend`) and have left their first ones far behind: the
+    iteration diverges, and more stages would only reach an overflow (the residuals of round-off noise may rise
+    for a stage or two, never by this much)."""
+    for name in failing:
+        r = history.get(name, ())
+        if len(r) >= 4 and _trend(r) == "growing" and max(r[-2:]) > DIVERGED * max(r[:2]):
+            return True
+    return False
 
 
 class RetryInterval(Exception):
@@ -288,8 +319,10 @@ class Relaxation:
         self._missed: dict[tuple[int, int], int] = {}  # (level, stage) -> the try at which it last missed
         self._previous: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # converged inputs of the last interval
         self.round_trips = self.requests = 0  # Run actions and subsim runs emitted so far
+        self.unconverged = self.rejected_stages = 0  # tries rolled back as not converged; stages of rolled-back tries
         self._magnitudes: dict[str, np.ndarray] = {}  # interval = "auto": largest |input| per channel so far
         self._next_length: float | None = None  # interval = "auto": the length of the interval after the last one
+        self._ceiling: tuple[float, int] = (math.inf, 0)  # interval = "auto": (ceiling, patience), see _auto_run
         self.resume_point: ResumePoint | None = None  # at the last Commit (None: not a point to go on from)
 
     def _action(self, stage: int, times: np.ndarray, inputs: dict[str, dict[str, np.ndarray]]) -> Run:
@@ -319,12 +352,13 @@ class Relaxation:
         H = self.settings.interval
         t = t_start if resume is None else resume.t
         summary = RunSummary(t)
-        trips, requests = self.round_trips, self.requests
+        trips, requests, unconverged, rejected_stages = self.round_trips, self.requests, self.unconverged, \
+            self.rejected_stages
         while t < t_stop - 1e-9 * H:
             interval = yield from self._interval(t, interval_end(t_start, t, H))  # on the grid from t_start
             summary.add(interval)
             t = float(interval.t[-1])
-        summary.round_trips, summary.requests = self.round_trips - trips, self.requests - requests
+        self._tally(summary, trips, requests, unconverged, rejected_stages)
         yield Done(summary)
         return summary
 
@@ -335,10 +369,11 @@ class Relaxation:
             try:
                 interval = yield from self._converge(times)
                 break
-            except NotConverged:
+            except (NotConverged, Diverged) as failed:
                 yield Rollback(float(times[0]), float(times[-1]))
                 if halvings == s.max_halvings:
                     raise
+                self._count_rejected(failed)
         interval.halvings = halvings
         return (yield from self._commit(interval))
 
@@ -354,8 +389,11 @@ class Relaxation:
         q = order(s.interp, s.samples)
         t, H = (t_start, control.clip(s.interval)) if resume is None or resume.length is None else (resume.t,
                                                                                                     resume.length)
+        # a length that did not converge is not grown back into for CEILING_PATIENCE intervals
+        ceiling, patience = (math.inf, 0) if resume is None else (resume.ceiling, resume.patience)
         summary = RunSummary(t)
-        trips, requests = self.round_trips, self.requests
+        trips, requests, unconverged, rejected_stages = self.round_trips, self.requests, self.unconverged, \
+            self.rejected_stages
         while t < t_stop - 1e-9 * H:
             rejected, guessed = 0, bool(self._previous)  # the first interval's stage 0 has no extrapolation
             while True:
@@ -366,35 +404,52 @@ class Relaxation:
                 times = sample_times(t, t1, s.samples)
                 try:
                     interval = yield from self._converge(times)
-                except NotConverged:
+                except (NotConverged, Diverged) as failed:
                     yield Rollback(t, t1)
                     if H <= control.minimum:
                         raise
+                    self._count_rejected(failed)
+                    ceiling, patience = min(ceiling, t1 - t), CEILING_PATIENCE
                     H, rejected = retry_length(H, math.inf, q, control), rejected + 1
                     continue
                 ratio, _ = error_ratio(interval.inputs, s.interp, control.tol, self._magnitudes, s.tol.abs)
                 if ratio > 1.0 and H > control.minimum and t1 - t > control.minimum:
                     yield Rollback(t, t1)
+                    self.rejected_stages += interval.stages
                     H, rejected = retry_length(min(H, t1 - t), ratio, q, control), rejected + 1
                     continue
                 break
             interval.halvings, interval.error = rejected, ratio
+            summary.over_tol += ratio > 1.0
             self._magnitudes = magnitudes(interval.inputs, self._magnitudes)
             if t1 - t >= H * (1 - 1e-9):  # a clipped last interval says nothing about a longer one
                 stages = interval.stages if guessed or s.first_guess != "extrapolate" else 1  # the error decides
                 H = next_length(H, ratio, stages, q, control)
-            self._next_length = H  # before the commit: part of its resume point
+            if patience:
+                H, patience = min(H, control.clip(CEILING_MARGIN * ceiling)), patience - 1
+                ceiling = ceiling if patience else math.inf
+            self._next_length, self._ceiling = H, (ceiling, patience)  # before the commit: part of its resume point
             yield from self._commit(interval, resumable=not clipped)
             summary.add(interval)
             t = t1
-        summary.round_trips, summary.requests = self.round_trips - trips, self.requests - requests
+        self._tally(summary, trips, requests, unconverged, rejected_stages)
         yield Done(summary)
         return summary
 
+    def _tally(self, summary: RunSummary, trips: int, requests: int, unconverged: int, rejected_stages: int) -> None:
+        """The summary's counts: what this machine emitted and rejected since they were taken."""
+        summary.round_trips, summary.requests = self.round_trips - trips, self.requests - requests
+        summary.unconverged, summary.rejected_stages = self.unconverged - unconverged, \
+            self.rejected_stages - rejected_stages
+
+    def _count_rejected(self, failed: NotConverged | Diverged) -> None:
+        self.unconverged += 1
+        self.rejected_stages += failed.stages if isinstance(failed, NotConverged) else failed.stage + 1
+
     def _commit(self, interval: Interval, resumable: bool = True) -> Generator[Action, Outputs | None, Interval]:
         self._previous = {k: (interval.t, v) for k, v in interval.inputs.items()}
-        self.resume_point = (ResumePoint(float(interval.t[-1]), self._next_length, self._previous, self._magnitudes)
-                             if resumable else None)
+        self.resume_point = (ResumePoint(float(interval.t[-1]), self._next_length, self._previous, self._magnitudes,
+                                         *self._ceiling) if resumable else None)
         yield Commit(interval)
         return interval
 
@@ -497,6 +552,8 @@ class Relaxation:
                 result = self._check(flat, last_stage, history)
                 if result.converged:
                     return Interval(times, outputs, inputs, stage + 1, history)
+                if s.auto is not None and _diverging(history, result.failing):  # retried shorter: no use going on
+                    raise NotConverged(float(times[0]), float(times[-1]), stage + 1, result.failing, history)
             last_stage = flat
             inputs = {k: c.evaluate(outputs, w, n) for k, c, w in self._all}
         raise NotConverged(float(times[0]), float(times[-1]), s.max_stages, result.failing, history)
@@ -543,6 +600,8 @@ class Relaxation:
                 result = self._check(new, fed_back, history)
                 if result.converged:
                     return Interval(times, outputs, inputs, stage + 1, history)
+                if s.auto is not None and _diverging(history, result.failing):  # retried shorter: no use going on
+                    raise NotConverged(float(times[0]), float(times[-1]), stage + 1, result.failing, history)
             fed_back = new
         raise NotConverged(float(times[0]), float(times[-1]), s.max_stages, result.failing, history)
 
