@@ -5,6 +5,8 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
+from cosim.contract import VERSION as __version__  # noqa: F401  (the contract imports nothing: still no NumPy)
+
 if TYPE_CHECKING:
     from cosim.api import run as run
     from cosim.purity import ImpureModel, check_pure
@@ -12,7 +14,6 @@ if TYPE_CHECKING:
     from cosim.subsim import ModelError, Param, Port, Subsim
 
 __all__ = ["ImpureModel", "ModelError", "Param", "Port", "Segment", "Subsim", "check_pure"]  # (cosim.run: not in *)
-__version__ = "0.1.0"
 
 # Each name's module, imported on first use: ``import cosim.<anything>`` then loads no NumPy on its own (the
 # ``cosim`` command answers Ctrl-C while it loads), and a subsim process never loads cosim.run's coordinator side.

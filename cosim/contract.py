@@ -7,6 +7,7 @@ carries them, handles re-raise them on the coordinator side. No I/O, no encoding
 from __future__ import annotations
 
 PROTOCOL_VERSION = 1
+VERSION = "0.1.0"  # this package's (cosim.__version__): both ends print it with the protocol's, to compare machines
 
 COMMANDS = ("describe", "configure", "run_interval", "commit", "rollback", "get_state", "set_state", "status",
             "shutdown")

@@ -196,6 +196,7 @@ class Coordinator:
         # seconds from sending to the reply of each subsim's latest run that was waited for (see _run)
         self._took: dict[str, float] = {}
         self._round_trips: deque[float] = deque(maxlen=ROUND_TRIPS_KEPT)  # s, each Run's requests to its last reply
+        self._slowest = 0.0  # s, the longest of them in the run
 
     @property
     def order(self) -> list[str]:
@@ -351,6 +352,7 @@ class Coordinator:
             elif isinstance(action, Done):
                 if self._round_trips:  # (an operator reads a slow or lossy link here)
                     action.summary.round_trip_median = statistics.median(self._round_trips)
+                    action.summary.round_trip_max = self._slowest
                 return action.summary
 
     def _run(self, action: Run) -> Outputs:
@@ -393,6 +395,7 @@ class Coordinator:
         took = time.perf_counter() - sent
         self.deadline.observe(took)
         self._round_trips.append(took)
+        self._slowest = max(self._slowest, took)
         uncommitted.difference_update(results)
         return {name: results[name].outputs for name in action.inputs}
 

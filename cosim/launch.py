@@ -36,7 +36,7 @@ from cosim.protocol.security import (
     zenoh_login,
 )
 from cosim.protocol.transport.client import EVERY_QUERYABLE, RemoteHandle
-from cosim.protocol.transport.session import UNIX_SOCKET, open_router, split_endpoint
+from cosim.protocol.transport.session import UNIX_SOCKET, open_router, split_endpoint, zenoh_mismatch
 
 
 def subsim_command(
@@ -250,6 +250,9 @@ class Bus:
         ``names``: the subsims of the run. Each then logs in with its own login, which may serve only that
         subsim's keys, so no subsim can read or answer another's requests (``--auth-file`` users may serve any
         of them). Without names, every subsim shares the run's login and may serve any subsim key."""
+        mismatch = zenoh_mismatch()
+        if mismatch is not None:
+            raise ValueError(mismatch)
         security = (security or Security()).check()
         run, secret = new_run_id() if run is None else check_name(run, "run id"), new_master_secret()
         site = read_dictionary(security.auth_file) if security.auth_file else {}
@@ -295,12 +298,14 @@ class Bus:
                              "gives logins only to the names it opened with")
 
     def command(self, module: str, name: str, model: str | None = None, lease: float | None = None,
-                endpoint: str | None = None, python: str = sys.executable) -> list[str]:
+                endpoint: str | None = None, python: str = sys.executable,
+                client: tuple[str, str] | None = None) -> list[str]:
         """The command line of a subsim of this run, connecting to ``endpoint`` (default: the router's) with
-        ``python`` (under mutual TLS, it shows the router's certificate; a subsim started elsewhere is given the
-        same TLS file paths, which must hold the same files there)."""
+        ``python``. Under mutual TLS it shows ``client`` (certificate, key), by default the router's own: a subsim
+        this machine launches (or one started elsewhere through a launcher, where the same paths must hold the
+        same files); an operator's command names a certificate of their machine instead."""
         sec = self.security
-        client = (sec.tls_cert, sec.tls_key) if sec.mutual and sec.tls_cert and sec.tls_key else None
+        client = client or ((sec.tls_cert, sec.tls_key) if sec.mutual and sec.tls_cert and sec.tls_key else None)
         return subsim_command(module, endpoint or self.endpoint, self.run, name, model, python=python,
                               tls_ca=sec.tls_ca, tls_client=client, lease=lease)
 

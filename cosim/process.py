@@ -25,10 +25,11 @@ from pathlib import Path
 import zenoh
 
 from cosim.console import prefixed_stream, say
+from cosim.contract import PROTOCOL_VERSION, VERSION
 from cosim.protocol.keys import check_name
 from cosim.protocol.security import SECRET_ENV, ZENOH_AUTH_ENV, ClientSecurity
 from cosim.protocol.transport.server import CommandServer
-from cosim.protocol.transport.session import UNIX_SOCKET, client_config, error_text, split_endpoint
+from cosim.protocol.transport.session import UNIX_SOCKET, client_config, error_text, split_endpoint, zenoh_mismatch
 from cosim.runtime import DEFAULT_HISTORY, Runtime
 from cosim.subsim import Subsim
 
@@ -80,6 +81,7 @@ def parse_args(model_cls: type[Subsim] | Subsim, argv: Sequence[str] | None,
         prog=prog or f"python -m {model_cls.__module__.rsplit('.', 1)[0]}",
         description=f"Serve the {model_cls.__name__} subsim over Zenoh.",
     )
+    p.add_argument("--version", action="version", version=f"cosim {VERSION} (protocol {PROTOCOL_VERSION})")
     p.add_argument("--connect", required=True, help="coordinator endpoint, e.g. tcp/127.0.0.1:7447")
     p.add_argument("--run", required=True, help="run id (namespaces every key)")
     p.add_argument("--name", default=model_cls.name, help=f"instance name on the bus (default: {model_cls.name})")
@@ -199,6 +201,10 @@ def main(model_cls: type[Subsim] | Subsim, argv: Sequence[str] | None = None, pr
                 runtime.on_model_error = lambda cmd, exc: say(
                     f"{args.name}: {cmd} failed: [{exc.code}] {exc.message}"
                     + (f"\n{exc.traceback.rstrip()}" if exc.traceback else ""))
+            mismatch = zenoh_mismatch()
+            if mismatch is not None:  # (an older zenoh serves, then fails every request with a TypeError)
+                say(f"{args.name}: {mismatch}")
+                return 2
             why, connected = unreachable(args.connect, min(2.0, args.connect_timeout))
             if why is not None:  # said at once: zenoh would retry until --connect-timeout, then say less
                 say(f"{args.name}: cannot reach the coordinator at {args.connect}: {why}")

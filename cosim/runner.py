@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import math
+import socket
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
@@ -192,7 +193,9 @@ def open_session(
                 wait = max(waited_until - time.monotonic(), min(ATTACH_FLOOR, external_wait))
                 handles[name] = attach(bus, scenario, name, timeout, wait,  # said with the wait the user set
                                        f"{NOT_APPEARED} {external_wait:g} s (--attach-wait; none serves run "
-                                       f"{bus.run!r} as {name!r}: check its --run and --name)")
+                                       f"{bus.run!r} as {name!r}: check its --run and --name, and what its "
+                                       "terminal says: a login or TLS this router refused is said there)")
+                check_served_model(scenario, name, handles[name].describe().model)
         for name, spec in scenario.subsims.items():
             try:
                 session.descriptions[name] = handles[name].configure(spec.params, t0=scenario.start)
@@ -241,6 +244,20 @@ AWAY_FLOOR = 10.0  # s: the shortest automatic deadline when a subsim is on anot
 # network blip shorter than that is waited out, not taken for a hang that costs a restart)
 
 
+def check_served_model(scenario: Scenario, name: str, served: str) -> None:
+    """ScenarioError when an external subsim serves another class than its scenario's ``model`` names (compared by
+    class name: a package may re-export a class under a shorter path): the operator started another model, and its
+    parameter errors would blame the scenario."""
+    model = scenario.subsims[name].model
+    if not model:  # the scenario leaves it to whatever serves the name
+        return
+    wanted = model.rpartition(":")[2].rpartition(".")[2]
+    if served.rpartition(".")[2] != wanted:
+        raise ScenarioError(f"{scenario.path}: [subsims.{name}] model = {model!r}, but the process that attached as "
+                            f"{name!r} serves {served}: start it with the command printed for it (or change the "
+                            "scenario's model)")
+
+
 def attach(bus: Bus, scenario: Scenario, name: str, timeout: float, wait: float, not_appeared: str) -> RemoteHandle:
     """A handle to external subsim ``name`` once it is up (within ``wait`` s, else ``not_appeared`` says so), with
     the lease its printed command gives it."""
@@ -257,14 +274,39 @@ def attach_lines(bus: Bus, scenario: Scenario, name: str, listen: str | None, fi
     at the run's start only) and the command with its two secrets."""
     endpoint, hint = attach_endpoint(listen, bus.endpoint)
     lease = scenario.run.lease if scenario.run.lease != RunSpec.lease else None  # the process's own default
-    cmd = bus.command("<your.subsim.module>", name, scenario.subsims[name].model, endpoint=endpoint, python="python",
-                      lease=lease)
+    mutual = bus.security.mutual  # its machine shows a certificate of its own: the router's key stays here
+    cmd = bus.command(PLACEHOLDER_MODULE, name, scenario.subsims[name].model, endpoint=endpoint, python="python",
+                      lease=lease, client=SITE_CERTIFICATE if mutual else None)
     env = bus.subsim_env(name)
     shown = " ".join(f"{k}={v}" for k, v in env.items())
     machine = "cosim-attach " + json.dumps({"endpoint": endpoint, "run": bus.run, "name": name, "command": cmd,
                                             "env": env}) + "\n" if first else ""
+    site = (f"\n  (mutual TLS: {SITE_CERTIFICATE[0]} and {SITE_CERTIFICATE[1]} stand for a certificate and key of the "
+            "subsim's machine, signed by the CA of --tls-ca; never copy the router's key there)") if mutual else ""
     return (f"{machine}cosim: external subsim {name!r}: start it with:\n  {shown} {' '.join(cmd)}\n"
-            f"  (the two variables are this subsim's secrets: hand them over privately)\n  ({hint})")
+            f"  (the two variables are this subsim's secrets: hand them over privately)\n  ({hint}){site}")
+
+
+PLACEHOLDER_MODULE = "YOUR_SUBSIM_MODULE"  # (placeholders a shell passes on as they are: no <, >, ' or spaces)
+PLACEHOLDER_HOST = "THIS_MACHINE_ADDRESS"
+SITE_CERTIFICATE = ("SITE_CERT.pem", "SITE_KEY.pem")
+
+
+def host_addresses() -> list[str]:
+    """This machine's IPv4 addresses other than loopback, as far as it can tell without sending anything: its
+    name's addresses and the source address of its default route."""
+    found = set()
+    try:
+        found.update(a[4][0] for a in socket.getaddrinfo(socket.gethostname(), None, socket.AF_INET))
+    except OSError:
+        pass
+    try:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            s.connect(("192.0.2.1", 9))  # (UDP: connecting picks the route and sends nothing)
+            found.add(s.getsockname()[0])
+    except OSError:  # no route out
+        pass
+    return sorted(a for a in found if not a.startswith("127.") and a != "0.0.0.0")
 
 
 def attach_endpoint(listen: str | None, endpoint: str) -> tuple[str, str]:
@@ -275,9 +317,14 @@ def attach_endpoint(listen: str | None, endpoint: str) -> tuple[str, str]:
         host, port = split_endpoint(listen or endpoint)[0], split_endpoint(endpoint)[1]
     except ValueError:  # a Unix socket
         return endpoint, "from another machine: the same command, on a machine that reaches this address"
-    if host in UNSPECIFIED_HOSTS:
-        return (f"{proto}/<this machine's address>:{port}",
-                "replace <this machine's address> by an address of this machine the subsim's machine reaches")
+    if host in UNSPECIFIED_HOSTS:  # listening on every address: the one to give is the one the other reaches
+        addresses = host_addresses()
+        if len(addresses) == 1:
+            return (f"{proto}/{addresses[0]}:{port}", f"{addresses[0]} is this machine's address; if the subsim's "
+                    "machine reaches it at another, give that")
+        have = f"this machine has {', '.join(addresses)}" if addresses else "none found here"
+        return (f"{proto}/{PLACEHOLDER_HOST}:{port}", f"replace {PLACEHOLDER_HOST} by an address of this machine the "
+                f"subsim's machine reaches ({have})")
     if host in ("127.0.0.1", "localhost", "[::1]", "::1"):
         return endpoint, (f"from another machine: run cosim with --listen {proto}/<an address of this machine>:<port> "
                           "(or 0.0.0.0 for every address) and give the subsim that address")

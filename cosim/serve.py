@@ -9,12 +9,16 @@ from __future__ import annotations
 import os
 import sys
 
+from cosim.contract import PROTOCOL_VERSION, VERSION
 from cosim.importing import MODULE_PATH_ENV, load_model, use_search_path
 from cosim.process import main as serve_model
 
 
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
+    if argv[:1] == ["--version"]:
+        print(f"cosim {VERSION} (protocol {PROTOCOL_VERSION})")
+        return 0
     if not argv or argv[0].startswith("-"):
         asked = bool(argv) and argv[0] in ("-h", "--help")
         print("usage: python -m cosim.serve package.module:Class --connect ENDPOINT --run RUN [--name NAME]"

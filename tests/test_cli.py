@@ -105,9 +105,11 @@ def test_run_says_what_it_cost_in_requests(tmp_path: Path) -> None:
                              str(tmp_path / "o.csv"), "--quiet"], capture_output=True, text=True, timeout=120)
     assert remote.returncode == 0, remote.stderr
     # over the bus, what a round trip took (a lossy link made a run 13x slower with no word of it: multi-host probe)
-    took = re.search(r"round trips per simulated second\); a round trip took ([0-9.e+-]+) ms \(median\)\n",
-                     remote.stdout)
+    took = re.search(r"round trips per simulated second\); a round trip took ([0-9.e+-]+) ms \(median\), "
+                     r"([0-9.e+-]+) (ms|s) at most\n", remote.stdout)
     assert took is not None and 0.01 < float(took.group(1)) < 10_000, remote.stdout
+    slowest = float(took.group(2)) * (1e3 if took.group(3) == "s" else 1.0)  # (a stalled subsim shows here)
+    assert slowest >= float(took.group(1)), remote.stdout
     unified = subprocess.run([*COSIM, "run", str(satellite), "--stop", "4", "--output", str(tmp_path / "u.csv"),
                               "--method", "unified", "--quiet"], capture_output=True, text=True, timeout=120)
     assert unified.returncode == 0 and "requests:" not in unified.stdout  # one program: no requests
@@ -322,3 +324,16 @@ def test_the_summary_counts_the_rejected_tries_and_the_intervals_over_interval_t
     assert tries == rejected > 0 and unconverged + over_tol == tries and unconverged >= 1  # 0.1 s diverges
     assert stages >= 2 * tries  # every try ran a check: two stages at least
     assert f"over interval_tol: {over} intervals, accepted at interval_min" in done.stdout and over > 0
+
+
+def test_both_ends_print_the_package_and_protocol_versions_and_the_package_version_is_pyprojects() -> None:
+    """Every tree printed 'cosim 0.1.0', so an operator comparing two machines learned nothing of the protocol."""
+    import tomllib
+
+    from cosim.contract import PROTOCOL_VERSION
+
+    version = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["version"]
+    for cmd in ([*COSIM, "--version"], [sys.executable, "-m", "cosim.serve", "--version"],
+                [sys.executable, "-m", "subsims.oscillator", "--version"]):
+        done = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
+        assert (done.returncode, done.stdout.strip()) == (0, f"cosim {version} (protocol {PROTOCOL_VERSION})"), cmd

@@ -662,7 +662,7 @@ def test_describe_into_a_closed_pipe_exits_quietly() -> None:
 
 def test_version() -> None:
     done = cosim("--version")
-    assert done.returncode == 0 and done.stdout.strip() == f"cosim {__version__}"
+    assert done.returncode == 0 and done.stdout.strip() == f"cosim {__version__} (protocol 1)"
 
 
 def test_a_signal_after_the_command_is_done_does_not_change_its_exit_status(tmp_path: Path) -> None:
@@ -730,7 +730,7 @@ def test_a_signal_the_parent_ignored_stays_ignored_while_the_command_loads() -> 
     """A background job's SIGINT is ignored from the start: the command must not start answering it."""
     script = _SIGNAL_WHILE_STARTING.format(signal="SIGINT", ignored=True, when="loading")
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60, env=ENV)
-    assert (done.returncode, done.stdout.strip()) == (0, f"cosim {__version__}"), done.stderr
+    assert (done.returncode, done.stdout.strip()) == (0, f"cosim {__version__} (protocol 1)"), done.stderr
 
 
 def test_progress_on_a_terminal_shows_time_rate_and_time_left_and_ends_at_100(tmp_path: Path) -> None:

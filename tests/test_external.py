@@ -144,3 +144,72 @@ def test_every_external_subsims_command_comes_before_the_wait_and_carries_the_ru
                                                                    "'mass2'")
     assert done.stderr.rindex("cosim-attach ") < done.stderr.index("waiting up to")
     assert "mass1.connect: [no_responder] no process appeared within 1 s (--attach-wait; " in done.stderr
+
+
+def test_a_router_on_every_address_gives_its_one_address_or_a_placeholder_a_shell_passes_on(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """--listen tcp/0.0.0.0:P printed tcp/<this machine's address>:P, which a shell refuses when pasted (the quote
+    and the redirections); the machine's address when it has one, else a placeholder naming those it has."""
+    import shlex
+
+    import cosim.runner as runner
+
+    monkeypatch.setattr(runner, "host_addresses", lambda: ["10.1.2.3"])
+    assert runner.attach_endpoint("tcp/0.0.0.0:7447", "tcp/127.0.0.1:7447")[0] == "tcp/10.1.2.3:7447"
+    monkeypatch.setattr(runner, "host_addresses", lambda: ["10.1.2.3", "192.168.5.6"])
+    endpoint, hint = runner.attach_endpoint("tcp/0.0.0.0:7447", "tcp/127.0.0.1:7447")
+    assert endpoint == "tcp/THIS_MACHINE_ADDRESS:7447" and shlex.split(endpoint) == [endpoint]
+    assert "this machine has 10.1.2.3, 192.168.5.6" in hint
+    monkeypatch.setattr(runner, "host_addresses", lambda: [])
+    assert "none found here" in runner.attach_endpoint("tcp/0.0.0.0:7447", "tcp/127.0.0.1:7447")[1]
+
+
+def test_a_subsim_of_another_protocol_version_is_named_as_such_on_both_sides(cosim_bus, tmp_path: Path) -> None:
+    """A protocol-2 subsim answered a protocol-1 coordinator: 'malformed reply: protocol version 2 not supported
+    (this end speaks 1)' there (a buggy subsim?), and on the subsim's terminal only 'the coordinator left'."""
+    from cosim.contract import PROTOCOL_VERSION, SubsimError
+    from cosim.launch import terminate
+
+    newer = ("import sys, cosim.contract as c; c.PROTOCOL_VERSION += 1\n"  # before the codec reads it
+             "from cosim.serve import main; sys.exit(main(sys.argv[1:]))\n")
+    proc = subprocess.Popen([sys.executable, "-c", newer, "subsims.oscillator.subsim:Mass", "--connect",
+                             cosim_bus.endpoint, "--run", cosim_bus.run, "--name", "m2"],
+                            env={**os.environ, **cosim_bus.subsim_env("m2")}, stderr=subprocess.PIPE, text=True)
+    handle = None
+    try:
+        handle = cosim_bus.attach("m2", timeout=20.0, wait=20.0)
+        with pytest.raises(SubsimError) as err:
+            handle.describe()
+        assert err.value.code == "version" and "malformed" not in str(err.value)
+        assert err.value.message == (f"it speaks protocol {PROTOCOL_VERSION + 1}, this coordinator {PROTOCOL_VERSION}: "
+                                     "run the same cosim version on its machine and here (cosim --version)")
+    finally:
+        if handle is not None:
+            handle.close()
+        terminate(proc, 5.0)
+    said = proc.stderr.read()
+    assert (f"m2: the coordinator speaks protocol {PROTOCOL_VERSION}, this subsim {PROTOCOL_VERSION + 1}: run the "
+            "same cosim version on both machines (cosim --version)") in said, said
+
+
+def test_an_external_subsim_serving_another_model_is_refused_naming_both(tmp_path: Path, procs: list) -> None:
+    """Another model attached as mass2 was configured with mass2's params, and the run stopped on
+    '[subsims.mass2.params] configure: bad parameter: unknown parameter(s) 'm', 'k', ...': the scenario blamed for
+    the remote's code."""
+    coord = subprocess.Popen([*COSIM, "run", str(external_scenario(tmp_path)), "--stop", "0.1", "--output",
+                              str(tmp_path / "x.csv"), "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                             text=True)
+    procs.append(coord)
+    attach = None
+    for line in coord.stderr:
+        if line.startswith("cosim-attach "):
+            attach = json.loads(line.removeprefix("cosim-attach "))
+            break
+    assert attach is not None, "no attach line"
+    other = [sys.executable, "-m", "cosim.serve", "subsims.integrator.subsim:Integrator", *attach["command"][4:]]
+    procs.append(subprocess.Popen(other, stderr=subprocess.DEVNULL, env={**os.environ, **attach["env"]}))
+    _, err = coord.communicate(timeout=120)
+    assert coord.returncode == 2
+    assert ("[subsims.mass2] model = 'subsims.oscillator.subsim:Mass', but the process that attached as 'mass2' "
+            "serves subsims.integrator.subsim.Integrator: start it with the command printed for it") in err, err
+    assert "bad parameter" not in err

@@ -341,3 +341,32 @@ def test_a_subsim_that_timed_out_is_killed_at_once_when_stopped(cosim_bus: Bus) 
     assert err.value.code == "timeout" and str(err.value).endswith("no reply within 1 s (hung or stopped?)")
     assert proc.handle.hung
     assert proc.stop() == -signal.SIGKILL
+
+
+@pytest.mark.parametrize(("installed", "refused"), [("1.0.4", True), ("1.9.9", True), ("2.0.0", True),
+                                                    ("1.10.0", False), ("1.10.2", False), ("1.12.0rc1", False)])
+def test_an_eclipse_zenoh_this_transport_is_not_written_for_is_named_in_one_line(
+        monkeypatch: pytest.MonkeyPatch, installed: str, refused: bool) -> None:
+    """A subsim on a machine with eclipse-zenoh 1.0.4 said 'serving run', then printed 1,372 TypeError tracebacks in
+    15 s, and the coordinator asked whether it had this run's COSIM_SECRET (version-skew probe)."""
+    import importlib.metadata
+
+    from cosim.protocol.transport import session
+
+    monkeypatch.setattr(importlib.metadata, "version", lambda name: installed)
+    said = session.zenoh_mismatch()
+    assert (said is not None) == refused
+    if refused:
+        assert said == (f"cosim needs eclipse-zenoh >= 1.10, < 2 and this Python has {installed}: "
+                        "pip install 'eclipse-zenoh>=1.10,<2'")
+
+
+def test_a_subsim_process_on_an_old_eclipse_zenoh_exits_with_that_line_before_serving() -> None:
+    older = ("import sys, importlib.metadata as m; m.version = lambda name: '1.0.4'\n"
+             "from cosim.serve import main; sys.exit(main(sys.argv[1:]))\n")
+    done = subprocess.run([sys.executable, "-c", older, "subsims.oscillator.subsim:Mass", "--connect",
+                           "tcp/127.0.0.1:9", "--run", "r1", "--name", "m"], capture_output=True, text=True, timeout=60,
+                          env={**os.environ, "COSIM_SECRET": "00" * 32})
+    assert done.returncode == 2
+    assert done.stderr == "m: cosim needs eclipse-zenoh >= 1.10, < 2 and this Python has 1.0.4: pip install " \
+                          "'eclipse-zenoh>=1.10,<2'\n", done.stderr

@@ -101,3 +101,29 @@ def test_cosim_run_with_a_certificate_listens_on_tls_by_default_and_asks_for_the
                              capture_output=True, text=True, timeout=60)
     assert missing.returncode == 2 and f"--tls-ca (tls_ca in [security]): no such file: {tmp_path / 'nope.pem'}" \
         in missing.stderr
+
+
+@pytest.mark.parametrize("mutual", [False, True], ids=["server-cert", "mutual"])
+def test_an_external_subsims_command_never_hands_out_the_routers_key(certs: dict[str, Path], tmp_path: Path,
+                                                                     mutual: bool) -> None:
+    """Under mutual TLS the printed command held --tls-cert router.pem --tls-key router.key (version-skew probe): an
+    operator following it copied the router's key to every site, and any site could pose as the coordinator."""
+    import shlex
+
+    from cosim.runner import attach_lines
+    from cosim.scenario import load
+
+    scenario_file = tmp_path / "o.toml"
+    scenario_file.write_text(OSCILLATOR.read_text().replace("[subsims.mass2]\n", "[subsims.mass2]\nexternal = true\n"))
+    with tls_bus(certs, mutual) as bus:
+        text = attach_lines(bus, load(scenario_file), "mass2", None, first=True)
+    command = next(line for line in text.splitlines() if "COSIM_SECRET=" in line)
+    words = shlex.split(command)  # pasted into a shell as it is printed
+    assert str(certs["router_key"]) not in text and str(certs["router_pem"]) not in command
+    assert words[words.index("--tls-ca") + 1] == str(certs["ca_pem"])
+    if mutual:
+        assert words[words.index("--tls-cert") + 1:words.index("--tls-key") + 2] == \
+            ["SITE_CERT.pem", "--tls-key", "SITE_KEY.pem"]
+        assert "SITE_CERT.pem and SITE_KEY.pem stand for a certificate and key of the subsim's machine" in text
+    else:
+        assert "--tls-cert" not in words and "SITE_" not in text

@@ -165,6 +165,7 @@ class RunSummary:
     round_trips: int = 0  # Run actions, rejected tries included (the subsims of one Run answer concurrently)
     requests: int = 0  # subsim runs, rejected tries included
     round_trip_median: float | None = None  # s from a Run's requests to its last reply (recent ones; by the driver)
+    round_trip_max: float | None = None  # s, the longest of them (a subsim that stalled, not a slow link)
     unconverged: int = 0  # of the rejected tries: those that did not converge (or diverged), not over interval_tol
     rejected_stages: int = 0  # stages the rejected tries ran
     over_tol: int = 0  # interval = "auto": intervals accepted at interval_min above interval_tol

@@ -148,12 +148,20 @@ def _plain(value: Any) -> Any:
     return value
 
 
+class VersionMismatch(ProtocolError):
+    """The other end speaks another protocol ``version``: another cosim version (or an implementation of another)."""
+
+    def __init__(self, version: int) -> None:
+        super().__init__("version", f"protocol version {version} not supported (this end speaks {PROTOCOL_VERSION})")
+        self.version = version
+
+
 def _check_version(msg: dict) -> None:
     v = msg.get("v")
     if isinstance(v, bool) or not isinstance(v, int):
         raise ProtocolError("version", f"field 'v' must be the protocol version integer, got {v!r}"[:120])
     if v != PROTOCOL_VERSION:
-        raise ProtocolError("version", f"protocol version {v} not supported (this end speaks {PROTOCOL_VERSION})")
+        raise VersionMismatch(v)
 
 
 _ENVELOPE = frozenset({"v", "cmd", "args"})

@@ -12,9 +12,10 @@ from collections import Counter
 from collections.abc import Mapping
 from typing import NamedTuple
 
-from cosim.contract import CosimError
+from cosim.contract import PROTOCOL_VERSION, CosimError
 from cosim.protocol.messages import (
     SEAL_BYTES,
+    VersionMismatch,
     decode_request,
     encode_error,
     encode_result,
@@ -36,6 +37,9 @@ CAP_FLOOR = 1 << 20
 REPLAY_WINDOW = 1024
 
 
+_told_versions: list[int] = []  # the other protocol versions this process has said it does not speak
+
+
 def answer(runtime: Runtime, payload: bytes | memoryview) -> bytes:
     """Turn one request payload into one reply payload. Never raises."""
     cmd = "?"
@@ -46,6 +50,10 @@ def answer(runtime: Runtime, payload: bytes | memoryview) -> bytes:
     except CosimError as exc:
         if cmd == "?":
             cmd = request_command(payload)
+        if isinstance(exc, VersionMismatch) and not _told_versions:  # said here too, once: this side's operator
+            _told_versions.append(exc.version)  # sees only "the coordinator left" otherwise
+            log.warning("%s: the coordinator speaks protocol %s, this subsim %s: run the same cosim version on both "
+                        "machines (cosim --version)", runtime.name, exc.version, PROTOCOL_VERSION)
         return encode_error(exc.code, exc.message, runtime.name, cmd, exc.traceback)
     except Exception as exc:  # last line of defence: the process must survive any request
         log.exception("unexpected failure serving %s", cmd)

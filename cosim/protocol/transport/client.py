@@ -11,10 +11,18 @@ from typing import Any
 
 import zenoh
 
-from cosim.contract import MalformedReply, ProtocolError, SubsimDied, SubsimError, SubsimHung, SubsimLeft
+from cosim.contract import (
+    PROTOCOL_VERSION,
+    MalformedReply,
+    ProtocolError,
+    SubsimDied,
+    SubsimError,
+    SubsimHung,
+    SubsimLeft,
+)
 from cosim.handles import SubsimHandle
 from cosim.protocol.keys import alive_key, check_name, rpc_key
-from cosim.protocol.messages import ErrorInfo, decode_reply, encode_request, next_seq, sealer
+from cosim.protocol.messages import ErrorInfo, VersionMismatch, decode_reply, encode_request, next_seq, sealer
 
 FAST_QUERY_TIMEOUT = 4.0  # seconds: zenoh's own timeout of requests whose deadline is at most half of it
 GONE_GRACE = 0.3  # seconds a request may still be answered after its subsim's liveliness token went
@@ -313,6 +321,10 @@ class RemoteHandle(SubsimHandle):
                                       "again (or --resume)", self.name, cmd)
                 try:
                     result = decode_reply(cmd, body)
+                except VersionMismatch as exc:  # not a malformed reply: another cosim there
+                    raise SubsimError("version", f"it speaks protocol {exc.version}, this coordinator "
+                                      f"{PROTOCOL_VERSION}: run the same cosim version on its machine and here "
+                                      "(cosim --version)", self.name, cmd) from None
                 except ProtocolError as exc:
                     raise MalformedReply(exc.code, exc.message, self.name, cmd) from None
                 if isinstance(result, ErrorInfo):

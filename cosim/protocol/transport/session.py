@@ -37,6 +37,26 @@ SINGLE_THREAD_RUNTIME = (
 )
 
 
+ZENOH_NEEDED = (1, 10)  # the eclipse-zenoh this transport is written for (pyproject.toml: >=1.10,<2)
+
+
+def zenoh_mismatch() -> str | None:
+    """One line when the installed eclipse-zenoh is not one this transport works with (an older one fails with a
+    TypeError on every request it serves), else None."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        have = version("eclipse-zenoh")
+    except PackageNotFoundError:
+        return None  # (a build from source: nothing to compare)
+    numbers = tuple(int(x) for x in re.findall(r"\d+", have)[:2])
+    if ZENOH_NEEDED <= numbers < (ZENOH_NEEDED[0] + 1,):
+        return None
+    needed = ".".join(map(str, ZENOH_NEEDED))
+    return (f"cosim needs eclipse-zenoh >= {needed}, < {ZENOH_NEEDED[0] + 1} and this Python has {have}: "
+            f"pip install 'eclipse-zenoh>={needed},<{ZENOH_NEEDED[0] + 1}'")
+
+
 # Incoming links: a flood of TCP connections that never log in (no login needed to open one) kept subsims out with
 # Zenoh's defaults, which admit 100 handshakes at a time and give each 10 s: 150 idle connections stopped a run from
 # starting. Many more may be pending, within the descriptors this process may open, and each gets 3 s: enough for a
