@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import argparse
+import errno
 import os
 import shlex
 import signal
+import stat
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -342,6 +344,14 @@ def main(argv: Sequence[str] | None = None, parsed: Callable[[], None] | None = 
     except BrokenPipeError:  # `cosim describe X | head -1`: the reader has what it wanted
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit
         return 141  # 128 + SIGPIPE, as a program killed by the signal
+    except OSError as exc:
+        if exc.errno != errno.EIO or not any(stat.S_ISCHR(os.fstat(fd).st_mode) for fd in (1, 2)):
+            raise  # (a hung-up terminal fails isatty(): a character device is what it still is)
+        # its terminal went away (closed with SIGHUP ignored, as under `trap '' HUP`): the run went on to its end
+        # (only its summary, printed last, met the closed terminal), and its files say the rest
+        for fd in (sys.stdout.fileno(), sys.stderr.fileno()):
+            os.dup2(os.open(os.devnull, os.O_WRONLY), fd)
+        return 0
     except OutputWriteError as exc:  # the run stopped; its files end at the last whole interval
         _say_stopped(exc)
         return 1

@@ -1,6 +1,6 @@
 """The ``cosim`` command's entry point: Ctrl-C is answered before the command's modules are loaded.
 
-Loading :mod:`cosim.cli` (NumPy, Zenoh, the coordinator) takes about 0.2 s; a SIGINT or SIGTERM then used to
+Loading :mod:`cosim.cli` (NumPy, Zenoh, the coordinator) takes about 0.2 s; a SIGINT, SIGTERM or SIGHUP then used to
 end in Python's traceback of whatever import it fell into. Until the command has read its arguments, one ends it
 quietly with the shell's status for it (128 + the signal), as the command itself does later. (Python's own start,
 before this module runs, is not covered.)"""
@@ -10,7 +10,7 @@ from __future__ import annotations
 import os
 import signal
 
-_EARLY = (signal.SIGINT, signal.SIGTERM)
+_EARLY = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)  # (the run answers the same three: cosim.interrupt)
 
 
 def _quit(signum: int, _frame: object) -> None:

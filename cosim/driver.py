@@ -330,8 +330,9 @@ class Coordinator:
                             ("not finite" in exc.message or "NaN or inf" in exc.message):  # (the runtime's words)
                         exc.add_note(f"it was at stage {action.stage} of the interval [{action.times[0]:g}, "
                                      f"{action.times[-1]:g}], on inputs the coupling iteration made: if that iteration "
-                                     "diverged (values growing stage by stage), a shorter [coupling] interval "
-                                     "(interval_min with interval = \"auto\") is the cure")
+                                     "diverged (values growing stage by stage), a shorter [coupling] "
+                                     f"{'interval_min' if self.settings.auto is not None else 'interval'} is the "
+                                     "cure")
                         diverged = Diverged(exc, action.stage)
                         continue
                     raise

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import errno
 import fcntl
+import glob
 import hashlib
 import json
 import os
@@ -180,8 +181,13 @@ def reserve_output(path: Path, overwrite: bool = False) -> OutputLock:
                           "choose another --output") from None
     lock = OutputLock.acquire(path)
     try:
-        for stale in path.parent.glob(f".{path.name}*.tmp-*"):  # an atomic write's or a staged file, left by a kill
-            stale.unlink(missing_ok=True)  # (the lock is ours: no run writes these files now)
+        # an atomic write's, a probe's or a staged file left by a kill, of this run's names only (not r.csv.2.csv's:
+        # another run's); the lock is ours, so no run writes these now
+        names = {name for f in run_files(path) for name in (f, symlink_target(f))}
+        for name in names:
+            own = glob.escape(f".{name.name}")  # (a [ in a file name is not a pattern)
+            for stale in [*name.parent.glob(f"{own}.tmp-*"), *name.parent.glob(f"{own}{STAGED}*")]:
+                stale.unlink(missing_ok=True)
         if not overwrite:  # the result, and its companions too (diagnostics, units, an NPZ's stream)
             for f in run_files(path):
                 if f.exists():
@@ -198,20 +204,23 @@ def reserve_output(path: Path, overwrite: bool = False) -> OutputLock:
 
 
 def probe_writable(path: Path) -> None:
-    """Create ``path`` and remove it again, or open an existing one for appending (writing nothing)."""
-    try:
-        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_CLOEXEC, 0o644)
-    except FileExistsError:
+    """Open an existing ``path`` for appending (writing nothing), or create a file beside it under the name of an
+    atomic write of it and remove that again: a kill in between leaves what the next run sweeps as stale, not an
+    empty file under the real name (which then read as a result, or a damaged resume point)."""
+    if path.exists() or path.is_symlink():
         try:
             fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CLOEXEC)
         except OSError as exc:
             raise OutputError(f"cannot write {path} ({describe_oserror(exc)}): choose another --output") from None
         os.close(fd)
         return
+    probe = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    try:
+        fd = os.open(probe, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_CLOEXEC, 0o644)
     except OSError as exc:
         raise OutputError(f"cannot create {path} ({describe_oserror(exc)}): choose another --output") from None
     os.close(fd)
-    os.unlink(path)
+    os.unlink(probe)
 
 
 class AppendFile:

@@ -63,14 +63,15 @@ class Progress:
         return (f"{pct:5.1f}%  t = {self.t:.6g} / {self.t_stop:.6g} s  {rate:.3g}x real time  "
                 f"{self.stages / max(self.intervals, 1):.2f} stages/interval  {left}")
 
-    def _draw(self, now: float) -> None:
+    def _draw(self, now: float, end: str = "") -> None:
         line = self.line(now)  # a terminal clears the rest of the line; a notebook gets spaces over it
-        self.stream.write("\r" + (line + "\x1b[K" if self.tty else line.ljust(100)))
-        self.stream.flush()
+        try:
+            self.stream.write("\r" + (line + "\x1b[K" if self.tty else line.ljust(100)) + end)
+            self.stream.flush()
+        except OSError:  # the terminal went away (closed, hung up: EIO): the run goes on without its progress line
+            self.enabled = False
 
     def done(self) -> None:
         """The final state (100 % if the run reached its stop), and a newline."""
         if self.enabled:
-            self._draw(self.clock())
-            self.stream.write("\n")
-            self.stream.flush()
+            self._draw(self.clock(), "\n")

@@ -201,7 +201,7 @@ class ResultWriter:
             diag_rows = _diag_rows_to(diag_path(self.path), t)
             digests = {"results": prefix_digest(data, keep), "diagnostics": prefix_digest(diag_path(self.path),
                                                                                           diag_rows[1])}
-            if written is not None and not rebuilt:  # (a stream rebuilt from the NPZ is not the bytes streamed)
+            if written is not None:  # (a stream rebuilt from the NPZ holds the bytes streamed: the same header, rows)
                 for name, path, size in (("results", data, keep), ("diagnostics", diag_path(self.path), diag_rows[1])):
                     if [size, digests[name].hexdigest()] != list(written[name]):
                         raise OutputError(f"{path} is not as the run left it up to its resume point at t = {t:g} "

@@ -499,13 +499,15 @@ def run_scenario(
         def each(interval: Interval) -> Iterator[None]:  # in steps: the coordinator writes while it waits
             try:
                 yield from writer.write_steps(interval)
+                with interrupt.deferred():  # a signal while a resume point is saved: raised once it is (it was lost)
+                    while checkpoints and writer.t_last is not None and checkpoints[0].point.t <= writer.t_last:
+                        point = checkpoints.pop(0)
+                        save_resume(resume_path(output), replace(point, written=writer.written(point.point.t),
+                                                                 models=models))
             except interrupt.Interrupted:  # a signal held back while the interval was written: it is in the files
                 if on_interval is not None and writer.holds(interval):
                     on_interval(interval)
                 raise
-            while checkpoints and writer.t_last is not None and checkpoints[0].point.t <= writer.t_last:  # written
-                point = checkpoints.pop(0)
-                save_resume(resume_path(output), replace(point, written=writer.written(point.point.t), models=models))
             bar.update(interval)
             if on_interval is not None:
                 on_interval(interval)

@@ -23,7 +23,7 @@ import numpy as np
 import pytest
 from terminal import as_from_a_terminal
 
-from cosim import __version__, interrupt
+from cosim import __version__, interrupt, resume
 from cosim.coupler.couplings import SignalRef
 from cosim.coupler.relaxation import Interval
 from cosim.outputs import (
@@ -684,8 +684,7 @@ class Hook(importlib.abc.MetaPathFinder):
     def find_spec(self, name, path, target=None):
         if name == "cosim.cli":
             os.kill(os.getpid(), signal.{signal})
-if {ignored}:
-    signal.signal(signal.{signal}, signal.SIG_IGN)
+signal.signal(signal.{signal}, signal.SIG_IGN if {ignored} else signal.SIG_DFL)  # (not as the suite was started)
 if "{when}" == "loading":
     sys.meta_path.insert(0, Hook())
 else:
@@ -702,7 +701,7 @@ sys.exit(cosim.command.main())
 
 
 @pytest.mark.parametrize("when", ["loading", "parsing"])
-@pytest.mark.parametrize("name", ["SIGINT", "SIGTERM"])
+@pytest.mark.parametrize("name", ["SIGINT", "SIGTERM", "SIGHUP"])  # (SIGHUP ended it silently: durability probe)
 def test_a_signal_while_the_command_starts_ends_it_in_one_line(name: str, when: str) -> None:
     """Ctrl-C in the first 0.2 s of `cosim` printed a KeyboardInterrupt traceback through importlib (a SIGTERM
     killed it, rc -15): one line and 128 + the signal, until the command has read its arguments."""
@@ -868,3 +867,53 @@ def test_a_signal_between_the_steps_of_a_write_still_writes_the_whole_interval(t
     data = read_results(out)[1]
     assert data.shape == (11, 2) and np.array_equal(data[:, 1], t**2)
     assert len(diag_rows(out.with_name("s.csv.diag.csv"))) == 1
+
+
+def test_a_run_whose_terminal_goes_away_finishes_its_files_and_exits_0(tmp_path: Path) -> None:
+    """The terminal closed under a run with SIGHUP ignored (`trap '' HUP`, a job the shell does not hang up): the
+    next progress redraw met EIO and the run stopped at t = 138 of 400 with exit 1 (durability probe)."""
+    master, slave = pty.openpty()
+    out = tmp_path / "h.csv"
+    proc = subprocess.Popen([*COSIM, "run", str(ROOT / "scenarios" / "satellite" / "case1.toml"), "--stop", "200",
+                             "--inprocess", "--output", str(out)], stdout=slave, stderr=slave, env=ENV)
+    os.close(slave)
+    try:
+        first = os.read(master, 4096)  # the first progress frame: the run is under way
+        assert b"real time" in first or b"%" in first, first
+        os.close(master)  # the terminal goes away: every later write to it fails with EIO
+        master = -1
+        proc.wait(timeout=120)
+    finally:
+        if master >= 0:
+            os.close(master)
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 0
+    assert out.read_text().splitlines()[-1].startswith("200.0,")
+
+
+def test_a_signal_while_a_resume_point_is_saved_is_raised_once_it_is_saved(tmp_path: Path, monkeypatch) -> None:
+    """A SIGINT while a resume point was written cut the write short: no resume point (at the first checkpoint: nothing
+    resumable), and 'stopped at t = 4.8 s' with the files at 5.2 (durability probe)."""
+    import cosim.runner as runner
+
+    save, saves = runner.save_resume, []
+
+    def save_under_a_signal(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202
+        saves.append(None)
+        if len(saves) == 2:
+            os.kill(os.getpid(), signal.SIGINT)  # arrives inside the save
+        save(*args, **kwargs)
+
+    monkeypatch.setattr(runner, "save_resume", save_under_a_signal)
+    scenario = tmp_path / "osc.toml"
+    scenario.write_text(OSCILLATOR.read_text() + "\n[run]\ncheckpoint_every = 10\n")
+    out, seen = tmp_path / "s.csv", []
+    with pytest.raises(interrupt.Interrupted):
+        with interrupt.handling():
+            run_scenario(load(scenario), stop=5.0, output=out, inprocess=True, progress=False, log=lambda s: None,
+                         on_interval=lambda iv: seen.append(float(iv.t[-1])))
+    point = resume.load(resume_path(out)).point
+    assert len(saves) == 2 and point.t == pytest.approx(1.0)  # the second checkpoint, at interval 20, is saved
+    assert read_results(out)[1][-1, 0] == seen[-1]  # the last committed time said is the files' end

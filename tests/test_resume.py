@@ -172,8 +172,27 @@ def test_an_atomic_write_cut_short_leaves_nothing_for_long(tmp_path: Path) -> No
     stale.write_bytes(b"half")
     other = tmp_path / ".y.csv.resume.npz.tmp-99999"  # another output's: not this run's to remove
     other.write_bytes(b"half")
+    longer = tmp_path / ".x.csv.2.csv.diag.csv.staged.tmp-99999"  # x.csv.2.csv's, a run that may be going on: its
+    longer.write_bytes(b"live")  # staged diagnostics were removed and it stopped (durability probe)
+    staged = tmp_path / ".x.csv.diag.csv.staged.tmp-99999"
+    staged.write_bytes(b"half")
     run_scenario(every(OSCILLATOR, 10), stop=0.5, output=out, inprocess=True, progress=False)
-    assert not stale.exists() and other.exists()
+    assert not stale.exists() and not staged.exists() and other.exists() and longer.exists()
+
+
+def test_proving_a_file_writable_never_leaves_an_empty_file_under_its_name(tmp_path: Path, monkeypatch) -> None:
+    """A SIGKILL between creating a result's name (to prove it could) and removing it left an empty x.csv ('exists:
+    pass --overwrite') or x.csv.resume.npz ('continue that run with --resume', then 'damaged')."""
+    from cosim import outputs
+
+    def killed(path):  # noqa: ANN001, ANN202
+        raise KeyboardInterrupt  # the process dies here
+
+    monkeypatch.setattr(outputs.os, "unlink", killed)
+    for name in ("x.csv", "x.csv.resume.npz"):
+        with pytest.raises(KeyboardInterrupt):
+            outputs.probe_writable(tmp_path / name)
+        assert not (tmp_path / name).exists()
 
 
 def _delete_line(lines: list[bytes]) -> list[bytes]:
@@ -280,3 +299,28 @@ def test_what_changed_since_a_resume_point_is_shown_short_and_exact() -> None:
     assert changes({"couplings": couplings}, {"couplings": couplings[:1]}) == [  # which one (it said 2 -> 1 only)
         'couplings: 2 -> 1 items; removed {"from": ["a.y"], "to": "b.u"}']
     assert changes({"g": [1.0, 2.0]}, {"g": [1.0, 2.0, 3.0, 4.0, 5.0, 6.0]}) == ["g: 2 -> 6 items; added 3, 4, 5, ..."]
+
+
+@pytest.mark.parametrize("edited", ["results", "diagnostics"])
+def test_an_npz_edited_since_its_run_stopped_is_refused_as_a_csv_is(tmp_path: Path, edited: str) -> None:
+    """A stopped run builds its NPZ; the resume streams it again and skipped the check of both files against the resume
+    point, so an NPZ whose row 10 was changed (or a diagnostics row) resumed and kept the change (durability probe)."""
+    sc = every(OSCILLATOR, 10)
+    part = tmp_path / "p.npz"
+    with pytest.raises(Stop):
+        run_scenario(sc, method="centralized", stop=3.0, output=part, inprocess=True, progress=False,
+                     on_interval=stop_after(47))
+    if edited == "results":
+        with np.load(part) as z:
+            arrays = {k: z[k] for k in z.files}
+        arrays["data"][10, 1] += 1000.0
+        np.savez(part, **arrays)
+    else:
+        diag = Path(f"{part}.diag.csv")
+        lines = diag.read_text().splitlines()
+        fields = lines[5].split(",")
+        fields[3] = str(int(fields[3]) + 1)  # the stages of interval 5
+        lines[5] = ",".join(fields)
+        diag.write_text("\n".join(lines) + "\n")
+    with pytest.raises(OutputError, match=r"is not as the run left it up to its resume point at t = 2"):
+        run_scenario(sc, method="centralized", stop=3.0, output=part, inprocess=True, progress=False, resume=True)
