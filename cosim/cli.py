@@ -17,7 +17,7 @@ from cosim.console import say
 from cosim.contract import PROTOCOL_VERSION, SubsimError
 from cosim.coupler.couplings import TransformError
 from cosim.coupler.relaxation import METHODS, Interval, NotConverged, Settings
-from cosim.outputs import OutputError, OutputWriteError, diag_path, resume_path
+from cosim.outputs import OutputError, OutputWriteError, diag_path, is_npz, resume_path, stream_path
 from cosim.preflight import UsageError, check_listen, check_run_options, check_stop, zenoh_error_line
 from cosim.protocol.keys import check_name
 from cosim.protocol.security import Security
@@ -45,10 +45,10 @@ def _run(args: argparse.Namespace) -> int:
     except (SubsimError, NotConverged, TransformError, OutputWriteError) as exc:  # said by main(), with this note
         if state["t"] is not None and state["output"] is not None:
             point = _resume_time(Path(state["output"]))
-            if point is not None:
-                how = "with --resume instead of --overwrite" if args.overwrite else "with --resume"
-                exc.add_note(f"every interval to t = {state['t']:.6g} s is in {state['output']}; once that is "
-                             f"fixed, the same command {how} goes on from t = {point:.6g} s")
+            kept = _kept(Path(state["output"]))
+            if point is not None and kept is not None:  # (a results file removed meanwhile is not there to go on)
+                exc.add_note(f"every interval to t = {state['t']:.6g} s is in {kept}; once that is fixed, the same "
+                             f"command {_with_resume(args)} goes on from t = {point:.6g} s")
         raise
     except interrupt.Interrupted as exc:
         stop, t = state.get("stop"), state["t"]
@@ -60,11 +60,26 @@ def _run(args: argparse.Namespace) -> int:
         if state["t"] is None:
             where = "before any new interval was committed" if args.resume else "before any interval was committed"
         else:
-            where = f"at t = {state['t']:.6g} s; every committed interval is in {state['output']}"
+            kept = _kept(Path(state["output"]))
+            where = f"at t = {state['t']:.6g} s" + (f"; every committed interval is in {kept}" if kept else "")
         if state["output"] is not None and resume_path(Path(state["output"])).exists():
-            where += " (go on with the same command and --resume)"
+            where += f" (go on with the same command {_with_resume(args)})"
         print(f"cosim: stopped by {exc.name} {where}", file=sys.stderr, flush=True)
         return exc.exit_status
+
+
+def _with_resume(args: argparse.Namespace) -> str:
+    return "with --resume instead of --overwrite" if args.overwrite else "with --resume"
+
+
+def _kept(output: Path) -> str | None:
+    """Where a stopped run's intervals are: its results file, or the samples an NPZ could not be built from yet (a
+    full disk) with how to build it; None when neither is there (removed during the run)."""
+    if output.exists():
+        return str(output)
+    if is_npz(output) and stream_path(output).exists():
+        return f"{stream_path(output)} (`cosim recover {output}` builds the NPZ from it)"
+    return None
 
 
 def _resume_time(output: Path) -> float | None:

@@ -337,3 +337,20 @@ def test_both_ends_print_the_package_and_protocol_versions_and_the_package_versi
                 [sys.executable, "-m", "subsims.oscillator", "--version"]):
         done = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
         assert (done.returncode, done.stdout.strip()) == (0, f"cosim {version} (protocol {PROTOCOL_VERSION})"), cmd
+
+
+def test_a_stopped_runs_note_names_where_its_intervals_are(tmp_path: Path) -> None:
+    """'every interval to t = 93.2 s is in small/x.npz' named a file a full disk had kept from being built (the samples
+    were in x.npz.partial), and after the results file was removed during a run the note sent the user to --resume,
+    which then failed (durability probe)."""
+    from cosim.cli import _kept
+    from cosim.outputs import stream_path
+
+    csv, npz = tmp_path / "a.csv", tmp_path / "b.npz"
+    assert _kept(csv) is None and _kept(npz) is None  # nothing there: nothing to go on from
+    csv.write_text("time,x\n")
+    stream_path(npz).write_bytes(b"samples")
+    assert _kept(csv) == str(csv)
+    assert _kept(npz) == f"{stream_path(npz)} (`cosim recover {npz}` builds the NPZ from it)"
+    npz.write_bytes(b"built")
+    assert _kept(npz) == str(npz)

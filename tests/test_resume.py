@@ -114,7 +114,7 @@ def test_cosim_run_resume_after_sigint_over_zenoh(tmp_path: Path) -> None:
             proc.wait()
     if proc.returncode == 0:
         pytest.skip("the run ended before SIGINT reached it")  # pragma: no cover - a 20 s run takes ~1 s
-    assert proc.returncode == 130 and "(go on with the same command and --resume)" in err, err
+    assert proc.returncode == 130 and "(go on with the same command with --resume)" in err, err
     done = subprocess.run([*cosim, "--output", str(part), "--resume"], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
     assert part.read_bytes() == whole.read_bytes()
