@@ -279,6 +279,15 @@ class AppendFile:
         except OSError:
             pass
 
+    def sync(self) -> None:
+        """What is written, on disk (before a resume point that counts on it is saved: after a power cut the point
+        must not name bytes the file lost)."""
+        if self.fd is not None:
+            try:
+                os.fsync(self.fd)
+            except OSError:  # (the next append says what is wrong with the file)
+                pass
+
     def close(self, sync: bool = True) -> None:
         if self.fd is None:
             return

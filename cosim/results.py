@@ -166,6 +166,12 @@ class ResultWriter:
                 symlink_target(path).unlink(missing_ok=True)  # (a link stays: it names what this run writes)
         self._staged.clear()
 
+    def sync(self) -> None:
+        """Both files' bytes on disk (see :meth:`AppendFile.sync`)."""
+        for f in (self._data, self._diag):
+            if f is not None:
+                f.sync()
+
     def written(self, t: float) -> dict[str, Any] | None:
         """What the files held when the interval ending at ``t`` was in (bytes and SHA-256 of each), for a resume
         point there; None if that is not known (long ago, or a file was cut back)."""

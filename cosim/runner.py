@@ -62,6 +62,9 @@ class Unrecorded:
     def written(self, t: float) -> None:
         return None
 
+    def sync(self) -> None:
+        pass
+
     def close(self, failed_run: bool = False) -> None:
         pass
 
@@ -501,7 +504,8 @@ def run_scenario(
                 yield from writer.write_steps(interval)
                 with interrupt.deferred():  # a signal while a resume point is saved: raised once it is (it was lost)
                     while checkpoints and writer.t_last is not None and checkpoints[0].point.t <= writer.t_last:
-                        point = checkpoints.pop(0)
+                        writer.sync()  # (a point saved, fsynced, before the rows it names are on disk: a power cut
+                        point = checkpoints.pop(0)  # would leave a point whose files the resume refuses)
                         save_resume(resume_path(output), replace(point, written=writer.written(point.point.t),
                                                                  models=models))
             except interrupt.Interrupted:  # a signal held back while the interval was written: it is in the files

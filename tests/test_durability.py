@@ -917,3 +917,29 @@ def test_a_signal_while_a_resume_point_is_saved_is_raised_once_it_is_saved(tmp_p
     point = resume.load(resume_path(out)).point
     assert len(saves) == 2 and point.t == pytest.approx(1.0)  # the second checkpoint, at interval 20, is saved
     assert read_results(out)[1][-1, 0] == seen[-1]  # the last committed time said is the files' end
+
+
+def test_the_rows_a_resume_point_names_are_on_disk_before_it_is_saved(tmp_path: Path, monkeypatch) -> None:
+    """The resume point was fsynced, the results and diagnostics it names were not: after a power cut the point could
+    name bytes the files lost, and the resume would be refused (durability probe, from the code)."""
+    import cosim.runner as runner
+
+    events: list[str] = []
+    fsync, save = os.fsync, runner.save_resume
+
+    def fsync_seen(fd: int) -> None:
+        events.append(os.readlink(f"/proc/self/fd/{fd}"))
+        fsync(fd)
+
+    def save_seen(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202
+        events.append("save")
+        save(*args, **kwargs)
+
+    monkeypatch.setattr(os, "fsync", fsync_seen)
+    monkeypatch.setattr(runner, "save_resume", save_seen)
+    scenario = tmp_path / "osc.toml"
+    scenario.write_text(OSCILLATOR.read_text() + "\n[run]\ncheckpoint_every = 10\n")
+    out = tmp_path / "s.csv"
+    run_scenario(load(scenario), stop=1.0, output=out, inprocess=True, progress=False, log=lambda s: None)
+    first = events.index("save")
+    assert {str(out), f"{out}.diag.csv"} <= set(events[:first]), events[:first]
