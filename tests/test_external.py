@@ -33,18 +33,21 @@ def external_scenario(tmp_path: Path) -> Path:
     return sc
 
 
-def test_run_id_attach_line_and_shutdown_of_the_external_subsim(tmp_path: Path, procs: list) -> None:
-    out = tmp_path / "ext.csv"
-    coord = subprocess.Popen([*COSIM, "run", str(external_scenario(tmp_path)), "--stop", "0.1", "--output", str(out),
-                              "--quiet", "--run-id", "launcher-run.1"], stdout=subprocess.PIPE,
-                             stderr=subprocess.PIPE, text=True)
+def start_waiting(tmp_path: Path, procs: list, *options: str) -> tuple[subprocess.Popen, dict]:
+    """``cosim run`` of the oscillator with mass2 external, to 0.1 s, up to its ``cosim-attach`` line: (the coordinator,
+    that line's JSON)."""
+    coord = subprocess.Popen([*COSIM, "run", str(external_scenario(tmp_path)), "--stop", "0.1", "--quiet", *options],
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     procs.append(coord)
-    attach = None
     for line in coord.stderr:
         if line.startswith("cosim-attach "):
-            attach = json.loads(line.removeprefix("cosim-attach "))
-            break
-    assert attach is not None, "no attach line"
+            return coord, json.loads(line.removeprefix("cosim-attach "))
+    raise AssertionError("no attach line")
+
+
+def test_run_id_attach_line_and_shutdown_of_the_external_subsim(tmp_path: Path, procs: list) -> None:
+    out = tmp_path / "ext.csv"
+    coord, attach = start_waiting(tmp_path, procs, "--output", str(out), "--run-id", "launcher-run.1")
     assert attach["run"] == "launcher-run.1" and attach["name"] == "mass2"
     assert attach["endpoint"].startswith("tcp/127.0.0.1:")
     command = attach["command"]
@@ -196,16 +199,7 @@ def test_an_external_subsim_serving_another_model_is_refused_naming_both(tmp_pat
     """Another model attached as mass2 was configured with mass2's params, and the run stopped on
     '[subsims.mass2.params] configure: bad parameter: unknown parameter(s) 'm', 'k', ...': the scenario blamed for
     the remote's code."""
-    coord = subprocess.Popen([*COSIM, "run", str(external_scenario(tmp_path)), "--stop", "0.1", "--output",
-                              str(tmp_path / "x.csv"), "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                             text=True)
-    procs.append(coord)
-    attach = None
-    for line in coord.stderr:
-        if line.startswith("cosim-attach "):
-            attach = json.loads(line.removeprefix("cosim-attach "))
-            break
-    assert attach is not None, "no attach line"
+    coord, attach = start_waiting(tmp_path, procs, "--output", str(tmp_path / "x.csv"))
     other = [sys.executable, "-m", "cosim.serve", "subsims.integrator.subsim:Integrator", *attach["command"][4:]]
     procs.append(subprocess.Popen(other, stderr=subprocess.DEVNULL, env={**os.environ, **attach["env"]}))
     _, err = coord.communicate(timeout=120)
