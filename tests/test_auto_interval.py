@@ -408,3 +408,19 @@ def test_samples_finer_than_a_double_resolves_at_the_runs_times_are_refused_befo
     assert not (tmp_path / "o.csv").exists()
     near = parse({**raw, "start": 1e9, "stop": 1e9 + 1.0}, sc.path)  # 1.2e-7 s there: 2.44e-5 s is resolved
     check_resolution(near, near.settings_for("distributed"), "distributed", near.stop)
+
+
+@pytest.mark.parametrize(("residuals", "diverging"), [
+    ([1.0, 16.0, 256.0, 4096.0], True),  # Gauss-Seidel on a coupling too stiff for the interval
+    ([0.0, 1.0, 0.0, 16.0, 0.0, 256.0], True),  # a Jacobi pair: each signal moves every other stage
+    ([0.0, 0.0, 0.0, 1e-3], False),  # far down a Jacobi chain: still, then its first change (then it falls)
+    ([0.0, 0.0, 0.0, 1e-3, 2e-3, 4e-3], False),  # ... growing, but not yet 100 times its first change
+    ([1e-16, 3e-16, 1e-16, 2e-16, 4e-16], False),  # round-off noise
+    ([1.0, 0.5, 0.25, 0.125], False),  # converging
+])
+def test_a_try_is_given_up_as_diverging_only_when_its_residuals_grow_far_past_their_first_change(
+        residuals: list[float], diverging: bool) -> None:
+    from cosim.coupler.relaxation import _diverging
+
+    assert _diverging({"s": residuals}, ["s"]) is diverging
+    assert _diverging({"s": residuals}, []) is False  # a signal that passes is never the reason

@@ -228,12 +228,14 @@ DIVERGED = 100.0  # interval = "auto": a residual growing past this many times i
 
 
 def _diverging(history: Mapping[str, list[float]], failing: Sequence[str]) -> bool:
-    """Whether a failing signal's residuals grow (:func:`_trend`) and have left their first ones far behind: the
-    iteration diverges, and more stages would only reach an overflow (the residuals of round-off noise may rise
-    for a stage or two, never by this much)."""
+    """Whether a failing signal's residuals grow (:func:`_trend`) and have left their first nonzero one far behind:
+    the iteration diverges, and more stages would only reach an overflow (the residuals of round-off noise may rise
+    for a stage or two, never by this much). From the first nonzero one: in a Jacobi chain a signal far down it does
+    not move for its first stages (residuals 0, 0, 0, then its first change, then falling)."""
     for name in failing:
         r = history.get(name, ())
-        if len(r) >= 4 and _trend(r) == "growing" and max(r[-2:]) > DIVERGED * max(r[:2]):
+        first = next((x for x in r if x > 0.0), 0.0)
+        if len(r) >= 4 and first > 0.0 and _trend(r) == "growing" and max(r[-2:]) > DIVERGED * first:
             return True
     return False
 
