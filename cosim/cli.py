@@ -360,7 +360,7 @@ def main(argv: Sequence[str] | None = None, parsed: Callable[[], None] | None = 
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit
         return 141  # 128 + SIGPIPE, as a program killed by the signal
     except OSError as exc:
-        if exc.errno != errno.EIO or not any(stat.S_ISCHR(os.fstat(fd).st_mode) for fd in (1, 2)):
+        if exc.errno != errno.EIO or not any(_character_device(fd) for fd in (1, 2)):
             raise  # (a hung-up terminal fails isatty(): a character device is what it still is)
         # its terminal went away (closed with SIGHUP ignored, as under `trap '' HUP`): the run went on to its end
         # (only its summary, printed last, met the closed terminal), and its files say the rest
@@ -388,6 +388,13 @@ def main(argv: Sequence[str] | None = None, parsed: Callable[[], None] | None = 
     except KeyboardInterrupt:
         say("cosim: interrupted; results up to the last committed interval are kept")
         return 130
+
+
+def _character_device(fd: int) -> bool:
+    try:
+        return stat.S_ISCHR(os.fstat(fd).st_mode)
+    except OSError:  # closed
+        return False
 
 
 def _say_stopped(exc: Exception) -> None:

@@ -296,20 +296,15 @@ SITE_CERTIFICATE = ("SITE_CERT.pem", "SITE_KEY.pem")
 
 
 def host_addresses() -> list[str]:
-    """This machine's IPv4 addresses other than loopback, as far as it can tell without sending anything: its
-    name's addresses and the source address of its default route."""
-    found = set()
-    try:
-        found.update(a[4][0] for a in socket.getaddrinfo(socket.gethostname(), None, socket.AF_INET))
-    except OSError:
-        pass
+    """This machine's IPv4 address on its route out, found without sending anything and without a name lookup
+    (which can wait seconds for a DNS server); none when it has no route out."""
     try:
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
             s.connect(("192.0.2.1", 9))  # (UDP: connecting picks the route and sends nothing)
-            found.add(s.getsockname()[0])
+            found = s.getsockname()[0]
     except OSError:  # no route out
-        pass
-    return sorted(a for a in found if not a.startswith("127.") and a != "0.0.0.0")
+        return []
+    return [] if found.startswith("127.") or found == "0.0.0.0" else [found]
 
 
 def attach_endpoint(listen: str | None, endpoint: str) -> tuple[str, str]:

@@ -37,7 +37,7 @@ CAP_FLOOR = 1 << 20
 REPLAY_WINDOW = 1024
 
 
-_told_versions: list[int] = []  # the other protocol versions this process has said it does not speak
+_told_versions: set[int] = set()  # the other protocol versions this process has said it does not speak
 
 
 def answer(runtime: Runtime, payload: bytes | memoryview) -> bytes:
@@ -50,8 +50,8 @@ def answer(runtime: Runtime, payload: bytes | memoryview) -> bytes:
     except CosimError as exc:
         if cmd == "?":
             cmd = request_command(payload)
-        if isinstance(exc, VersionMismatch) and not _told_versions:  # said here too, once: this side's operator
-            _told_versions.append(exc.version)  # sees only "the coordinator left" otherwise
+        if isinstance(exc, VersionMismatch) and exc.version not in _told_versions:  # said here too, once: this
+            _told_versions.add(exc.version)  # side's operator sees only "the coordinator left" otherwise
             log.warning("%s: the coordinator speaks protocol %s, this subsim %s: run the same cosim version on both "
                         "machines (cosim --version)", runtime.name, exc.version, PROTOCOL_VERSION)
         return encode_error(exc.code, exc.message, runtime.name, cmd, exc.traceback)

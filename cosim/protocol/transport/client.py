@@ -32,14 +32,14 @@ PAUSE_REMEMBERED = 30.0  # s: a pause that ended longer before a death was found
 DIED_MID_REQUEST = "the process died during the request"
 GONE = "the subsim process is gone"
 NOT_APPEARED = "no process appeared within"  # (a wait for a subsim's token ran out)
-
-
-class NotAppeared(SubsimError):
-    """No process served the subsim's name within the wait: it was never started, or under another --run/--name."""
 SILENT_LIMIT = 15.0  # seconds a serving process (its token there, past a cut link's 10 s lease) may leave us unanswered
 # Every queryable on a subsim's key gets its requests (not only the best match): another login holder's queryable
 # declared there as complete would otherwise take them all and black-hole the subsim (its replies are forged anyway).
 EVERY_QUERYABLE = zenoh.QueryTarget.ALL
+
+
+class NotAppeared(SubsimError):
+    """No process served the subsim's name within the wait: it was never started, or under another --run/--name."""
 
 
 class _Pending:
