@@ -35,7 +35,6 @@ REAL_TYPES = {"Real", "Float64", "Float32"}
 INT_TYPES = {"Integer", "Enumeration", "Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32", "Int64", "UInt64"}
 FLOAT32_MAX = 3.4028234663852886e38
 LOG_SHOWN = 20  # distinct warnings of one FMU instance printed; the rest are counted, not shown
-STATUS = {1: "warning", 2: "discard", 3: "error", 4: "fatal", 5: "pending"}
 
 
 def _int_range(fmi_type: str, major: int) -> tuple[int, int]:
@@ -131,6 +130,14 @@ class RealPorts:
         f64 = [i for i, v in enumerate(variables) if v.type != "Float32"]
         return cls(tuple(v.vr for v in variables), tuple(variables[i].vr for i in f64), tuple(f64),
                    tuple(variables[i].vr for i in f32), tuple(f32))
+
+
+def _say(line: str) -> None:
+    """``line`` on stderr; nothing when no one reads it any more (inside the FMU's log callback nothing may raise)."""
+    try:
+        print(line, file=sys.stderr, flush=True)
+    except (OSError, ValueError):  # a closed pipe; a closed stream
+        pass
 
 
 def _one_line(exc: BaseException) -> str:
@@ -362,8 +369,7 @@ class Instance:
         kind = (category or b"").decode("utf-8", "replace")
         full = len(self._shown) == LOG_SHOWN
         last = f" ({LOG_SHOWN} warnings shown: any more are counted, not shown)" if full else ""
-        print(f"{self.name} ({self.info.path.name}): FMU warning{at}{f' [{kind}]' if kind else ''}: {text}{last}",
-              file=sys.stderr, flush=True)
+        _say(f"{self.name} ({self.info.path.name}): FMU warning{at}{f' [{kind}]' if kind else ''}: {text}{last}")
 
     def _why(self, exc: BaseException) -> str:
         msg = _one_line(exc).rstrip(".")
@@ -418,8 +424,7 @@ class Instance:
     def free(self) -> None:
         fmu, self._fmu = self._fmu, None
         if self.unshown:
-            print(f"{self.name} ({self.info.path.name}): {self.unshown} more FMU warning(s) not shown",
-                  file=sys.stderr, flush=True)
+            _say(f"{self.name} ({self.info.path.name}): {self.unshown} more FMU warning(s) not shown")
             self.unshown = 0
         if fmu is not None:
             try:
