@@ -7,7 +7,6 @@ import errno
 import os
 import shlex
 import signal
-import stat
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -55,7 +54,7 @@ def _run(args: argparse.Namespace) -> int:
         if t is not None and stop is not None and t >= stop - 1e-9 * max(1.0, abs(stop)):  # only its end was left
             resume_path(Path(state["output"])).unlink(missing_ok=True)  # (its subsims' last commit): it is whole
             say(f"cosim: {exc.name} came as the run finished; every interval to t = {t:.6g} s is in {state['output']}")
-            print(f"results: {state['output']}\ndiagnostics: {diag_path(Path(state['output']))}")  # as a run's end
+            _summary(f"results: {state['output']}\ndiagnostics: {diag_path(Path(state['output']))}")  # as a run's end
             return 0
         if state["t"] is None:
             where = "before any new interval was committed" if args.resume else "before any interval was committed"
@@ -64,8 +63,19 @@ def _run(args: argparse.Namespace) -> int:
             where = f"at t = {state['t']:.6g} s" + (f"; every committed interval is in {kept}" if kept else "")
         if state["output"] is not None and resume_path(Path(state["output"])).exists():
             where += f" (go on with the same command {_with_resume(args)})"
-        print(f"cosim: stopped by {exc.name} {where}", file=sys.stderr, flush=True)
+        say(f"cosim: stopped by {exc.name} {where}")  # (its terminal may be gone: the status still says it)
         return exc.exit_status
+
+
+def _summary(text: str) -> None:
+    """A finished run's summary on stdout. When its terminal went away (EIO: closed under a run that ignores SIGHUP)
+    it is dropped: the run got to its end, and its files say the rest."""
+    try:
+        print(text, flush=True)
+    except OSError as exc:
+        if exc.errno != errno.EIO:  # (a closed pipe: 141, in main)
+            raise
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # nothing left to fail at exit
 
 
 def _with_resume(args: argparse.Namespace) -> str:
@@ -135,32 +145,34 @@ def _run_until_done(args: argparse.Namespace, state: dict) -> int:
     s = report.summary
     hist = ", ".join(f"{k} stages: {v}" for k, v in sorted(s.stages.items()))
     resumed = f" from its resume point at t = {s.t_start:.6g}" if args.resume else ""
-    print(f"{scenario.name} ({report.method}): {s.intervals} intervals{resumed} to t = {s.t_end:.6g} in "
-          f"{s.wall_time:.2f} s{f' ({hist})' if hist else ''}")
+    lines = [f"{scenario.name} ({report.method}): {s.intervals} intervals{resumed} to t = {s.t_end:.6g} in "
+             f"{s.wall_time:.2f} s{f' ({hist})' if hist else ''}"]
     if report.method != "unified" and s.intervals:  # what the run cost in requests (rejected tries included)
         span = s.t_end - s.t_start
         per_second = f" ({s.round_trips / span:.3g} round trips per simulated second)" if span > 0 else ""
         took = "" if args.inprocess or s.round_trip_median is None else \
             f"; a round trip took {1e3 * s.round_trip_median:.2g} ms (median), {_duration(s.round_trip_max)} at most"
-        print(f"requests: {s.requests / s.intervals:.2f} an interval, sent in {s.round_trips / s.intervals:.2f} "
-              f"round trips{per_second}{took}")
+        lines.append(f"requests: {s.requests / s.intervals:.2f} an interval, sent in "
+                     f"{s.round_trips / s.intervals:.2f} round trips{per_second}{took}")
     if s.rejected:  # tries rolled back and run again shorter: their cost is in the wall time, not the histogram
-        print(f"rejected: {s.rejected} tries, retried shorter ({s.unconverged} not converged, "
-              f"{s.rejected - s.unconverged} over interval_tol), {s.rejected_stages} stages run in them")
+        why = (f"{s.unconverged} not converged, {s.rejected - s.unconverged} over interval_tol"
+               if scenario.settings_for(report.method).auto is not None else "not converged: max_halvings")
+        lines.append(f"rejected: {s.rejected} tries, retried shorter ({why}), {s.rejected_stages} stages run in them")
     if s.over_tol:
-        print(f"over interval_tol: {s.over_tol} intervals, accepted at interval_min (their error column in the "
-              "diagnostics says by how much)")
+        lines.append(f"over interval_tol: {s.over_tol} intervals, accepted at interval_min (their error column in "
+                     "the diagnostics says by how much)")
     for r in report.extra.get("restarts", []):
-        print(f"restart: {r.subsim} {r.reason}; " + (f"restored to t = {r.at:g}" if r.restored else
-                                                      "the replacement failed while being restored"))
+        lines.append(f"restart: {r.subsim} {r.reason}; " + (f"restored to t = {r.at:g}" if r.restored else
+                                                            "the replacement failed while being restored"))
     if report.method == "distributed":
-        print(f"order: {' -> '.join(report.order)}; feedback: {'; '.join(report.feedback) or 'none'}")
-    print(f"results: {report.output}\ndiagnostics: {report.diagnostics}")
+        lines.append(f"order: {' -> '.join(report.order)}; feedback: {'; '.join(report.feedback) or 'none'}")
+    lines.append(f"results: {report.output}\ndiagnostics: {report.diagnostics}")
+    _summary("\n".join(lines))
     if args.plot:
         from cosim.plot import plot_files
 
         pngs = plot_files([report.output], report.output.parent / "plots")
-        print(f"plots: {', '.join(str(p) for p in pngs)}")
+        _summary(f"plots: {', '.join(str(p) for p in pngs)}")
     return 0
 
 
@@ -359,14 +371,6 @@ def main(argv: Sequence[str] | None = None, parsed: Callable[[], None] | None = 
     except BrokenPipeError:  # `cosim describe X | head -1`: the reader has what it wanted
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit
         return 141  # 128 + SIGPIPE, as a program killed by the signal
-    except OSError as exc:
-        if exc.errno != errno.EIO or not any(_character_device(fd) for fd in (1, 2)):
-            raise  # (a hung-up terminal fails isatty(): a character device is what it still is)
-        # its terminal went away (closed with SIGHUP ignored, as under `trap '' HUP`): the run went on to its end
-        # (only its summary, printed last, met the closed terminal), and its files say the rest
-        for fd in (sys.stdout.fileno(), sys.stderr.fileno()):
-            os.dup2(os.open(os.devnull, os.O_WRONLY), fd)
-        return 0
     except OutputWriteError as exc:  # the run stopped; its files end at the last whole interval
         _say_stopped(exc)
         return 1
@@ -388,13 +392,6 @@ def main(argv: Sequence[str] | None = None, parsed: Callable[[], None] | None = 
     except KeyboardInterrupt:
         say("cosim: interrupted; results up to the last committed interval are kept")
         return 130
-
-
-def _character_device(fd: int) -> bool:
-    try:
-        return stat.S_ISCHR(os.fstat(fd).st_mode)
-    except OSError:  # closed
-        return False
 
 
 def _say_stopped(exc: Exception) -> None:

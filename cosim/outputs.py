@@ -285,8 +285,9 @@ class AppendFile:
         if self.fd is not None:
             try:
                 os.fsync(self.fd)
-            except OSError:  # (the next append says what is wrong with the file)
-                pass
+            except OSError as exc:  # (the kernel may drop the pages that failed: a later write would not say so)
+                raise OutputWriteError(f"{write_failure(exc, self.path)} ({self.what}, when its rows were made "
+                                       "durable), then run again") from None
 
     def close(self, sync: bool = True) -> None:
         if self.fd is None:

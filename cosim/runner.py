@@ -198,13 +198,14 @@ def open_session(
                                        f"{NOT_APPEARED} {external_wait:g} s (--attach-wait; none serves run "
                                        f"{bus.run!r} as {name!r}: check its --run and --name, and what its "
                                        "terminal says: a login or TLS this router refused is said there)")
-                check_served_model(scenario, name, handles[name].describe().model)
         for name, spec in scenario.subsims.items():
             try:
                 session.descriptions[name] = handles[name].configure(spec.params, t0=scenario.start)
             except SubsimError as exc:
                 if exc.code not in PARAMS_REFUSED or isinstance(exc, MalformedReply):  # not about its parameters
                     raise
+                if spec.external:  # perhaps another model attached: then it is to blame, not the scenario
+                    other_model(scenario, name, handles[name].describe().model, exc.message)
                 trace = f"\nthe model's traceback:\n{exc.traceback.rstrip()}" if exc.traceback else ""
                 # a ModelError: the model itself cannot run (an FMU that cannot save its state), whatever its params
                 table = f"subsims.{name}" if exc.code == "model_error" else f"subsims.{name}.params"
@@ -247,18 +248,16 @@ AWAY_FLOOR = 10.0  # s: the shortest automatic deadline when a subsim is on anot
 # network blip shorter than that is waited out, not taken for a hang that costs a restart)
 
 
-def check_served_model(scenario: Scenario, name: str, served: str) -> None:
-    """ScenarioError when an external subsim serves another class than its scenario's ``model`` names (compared by
-    class name: a package may re-export a class under a shorter path): the operator started another model, and its
-    parameter errors would blame the scenario."""
+def other_model(scenario: Scenario, name: str, served: str, refusal: str) -> None:
+    """ScenarioError when an external subsim that refused its parameters serves another class than its scenario's
+    ``model`` names (by class name: a package may re-export a class under a shorter path, or another name; so this is
+    said only of a subsim that refused): the operator started another model, which the refusal would blame on the
+    scenario."""
     model = scenario.subsims[name].model
-    if not model:  # the scenario leaves it to whatever serves the name
-        return
-    wanted = model.rpartition(":")[2].rpartition(".")[2]
-    if served.rpartition(".")[2] != wanted:
+    if model and served.rpartition(".")[2] != model.rpartition(":")[2].rpartition(".")[2]:
         raise ScenarioError(f"{scenario.path}: [subsims.{name}] model = {model!r}, but the process that attached as "
-                            f"{name!r} serves {served}: start it with the command printed for it (or change the "
-                            "scenario's model)")
+                            f"{name!r} serves {served}, which refused its params ({refusal}): start it with the "
+                            "command printed for it")
 
 
 def attach(bus: Bus, scenario: Scenario, name: str, timeout: float, wait: float, not_appeared: str) -> RemoteHandle:
@@ -317,6 +316,10 @@ def attach_endpoint(listen: str | None, endpoint: str) -> tuple[str, str]:
         return endpoint, "from another machine: the same command, on a machine that reaches this address"
     if host in UNSPECIFIED_HOSTS:  # listening on every address: the one to give is the one the other reaches
         addresses = host_addresses()
+        if proto in ("tls", "quic"):  # the subsim checks the router's certificate against the name it is given
+            seen = f" (this machine's address: {addresses[0]})" if addresses else ""
+            return (f"{proto}/{PLACEHOLDER_HOST}:{port}", f"replace {PLACEHOLDER_HOST} by the name or address the "
+                    f"router's certificate (--tls-cert) is for, as the subsim's machine reaches it{seen}")
         if len(addresses) == 1:
             return (f"{proto}/{addresses[0]}:{port}", f"{addresses[0]} is this machine's address; if the subsim's "
                     "machine reaches it at another, give that")

@@ -9,6 +9,7 @@ tested against it).
 
 from __future__ import annotations
 
+import math
 import os
 import tomllib
 from collections.abc import Mapping
@@ -307,8 +308,8 @@ class _Parser:
         v = table.get(key, default)
         if v is None:
             raise self.fail(f"{where}.{key}" if where else key, f"is required: {key} = <a number>")
-        if isinstance(v, bool) or not isinstance(v, (int, float)):
-            raise self.fail(f"{where}.{key}" if where else key, f"must be a number, got {v!r}")
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):  # (TOML has inf, nan)
+            raise self.fail(f"{where}.{key}" if where else key, f"must be a finite number, got {v!r}")
         return float(v)
 
     def string(self, table: Mapping, key: str, default: str, where: str = "") -> str:

@@ -424,3 +424,20 @@ def test_a_try_is_given_up_as_diverging_only_when_its_residuals_grow_far_past_th
 
     assert _diverging({"s": residuals}, ["s"]) is diverging
     assert _diverging({"s": residuals}, []) is False  # a signal that passes is never the reason
+
+
+def test_at_interval_min_a_try_is_never_given_up_before_max_stages() -> None:
+    """y' = -15 y over 1 s, integrated by trapezoids: the iteration's residuals grow (15^m / m!) before they fall,
+    and it converges in 65 stages. At interval_min no shorter try is left, and the divergence test ended the run
+    after 7 stages where a fixed interval converges (red team)."""
+    def answer(action: Run) -> dict:
+        t, u = action.times, action.inputs["y"]["u"][:, 0]
+        return {"y": {"y": (1.0 + np.concatenate([[0.0], np.cumsum(np.diff(t) * (u[1:] + u[:-1]) / 2)]))[:, None]}}
+
+    base = dict(method="centralized", interval=1.0, samples=33, first_guess="extrapolate", interp="linear",
+                tol=Tolerance(1e-8, 1e-10), max_stages=200)
+    fixed = [a for a in drive(Relaxation(feedback_loop(-15.0), Settings(**base)).run(0.0, 1.0), answer)
+             if isinstance(a, Commit)]
+    pinned = Settings(**base, auto=IntervalControl(initial=1.0, minimum=1.0, maximum=1.0, tol=1.0))
+    auto = [a for a in drive(Relaxation(feedback_loop(-15.0), pinned).run(0.0, 1.0), answer) if isinstance(a, Commit)]
+    assert fixed[0].interval.stages == auto[0].interval.stages > 20

@@ -869,19 +869,26 @@ def test_a_signal_between_the_steps_of_a_write_still_writes_the_whole_interval(t
     assert len(diag_rows(out.with_name("s.csv.diag.csv"))) == 1
 
 
-def test_a_run_whose_terminal_goes_away_finishes_its_files_and_exits_0(tmp_path: Path) -> None:
+@pytest.mark.parametrize("stopped", [False, True])
+def test_a_run_whose_terminal_goes_away_goes_on_and_exits_as_it_ends(tmp_path: Path, stopped: bool) -> None:
     """The terminal closed under a run with SIGHUP ignored (`trap '' HUP`, a job the shell does not hang up): the
-    next progress redraw met EIO and the run stopped at t = 138 of 400 with exit 1 (durability probe)."""
+    next progress redraw met EIO and the run stopped at t = 138 of 400 with exit 1 (durability probe). It goes on
+    and exits 0 at its end; stopped by a SIGTERM meanwhile, 143 (a first fix said 0 there: red team)."""
     master, slave = pty.openpty()
     out = tmp_path / "h.csv"
-    proc = subprocess.Popen([*COSIM, "run", str(ROOT / "scenarios" / "satellite" / "case1.toml"), "--stop", "200",
-                             "--inprocess", "--output", str(out)], stdout=slave, stderr=slave, env=ENV)
+    stop = "2000" if stopped else "200"
+    proc = subprocess.Popen([*COSIM, "run", str(ROOT / "scenarios" / "satellite" / "case1.toml"), "--stop", stop,
+                             "--inprocess", "--output", str(out)], stdout=slave, stderr=slave, env=ENV,
+                            preexec_fn=as_from_a_terminal)
     os.close(slave)
     try:
         first = os.read(master, 4096)  # the first progress frame: the run is under way
         assert b"real time" in first or b"%" in first, first
         os.close(master)  # the terminal goes away: every later write to it fails with EIO
         master = -1
+        if stopped:
+            time.sleep(1.0)
+            proc.send_signal(signal.SIGTERM)
         proc.wait(timeout=120)
     finally:
         if master >= 0:
@@ -889,8 +896,10 @@ def test_a_run_whose_terminal_goes_away_finishes_its_files_and_exits_0(tmp_path:
         if proc.poll() is None:
             proc.kill()
             proc.wait()
-    assert proc.returncode == 0
-    assert out.read_text().splitlines()[-1].startswith("200.0,")
+    if stopped:
+        assert proc.returncode == 128 + signal.SIGTERM and resume_path(out).exists()
+    else:
+        assert proc.returncode == 0 and out.read_text().splitlines()[-1].startswith("200.0,")
 
 
 def test_a_signal_while_a_resume_point_is_saved_is_raised_once_it_is_saved(tmp_path: Path, monkeypatch) -> None:
@@ -943,3 +952,22 @@ def test_the_rows_a_resume_point_names_are_on_disk_before_it_is_saved(tmp_path: 
     run_scenario(load(scenario), stop=1.0, output=out, inprocess=True, progress=False, log=lambda s: None)
     first = events.index("save")
     assert {str(out), f"{out}.diag.csv"} <= set(events[:first]), events[:first]
+
+
+def test_a_failed_fsync_stops_the_run_before_a_resume_point_names_those_rows(tmp_path: Path, monkeypatch) -> None:
+    """fsync failing with EIO was swallowed and the resume point saved anyway, naming rows a failed fsync may have
+    dropped (red team)."""
+    fsync = os.fsync
+
+    def failing(fd: int) -> None:
+        if os.readlink(f"/proc/self/fd/{fd}").endswith(".csv"):
+            raise OSError(errno.EIO, "Input/output error")
+        fsync(fd)
+
+    monkeypatch.setattr(os, "fsync", failing)
+    scenario = tmp_path / "osc.toml"
+    scenario.write_text(OSCILLATOR.read_text() + "\n[run]\ncheckpoint_every = 10\n")
+    out = tmp_path / "s.csv"
+    with pytest.raises(OutputWriteError, match=r"Input/output error .*\(results, when its rows were made durable\)"):
+        run_scenario(load(scenario), stop=1.0, output=out, inprocess=True, progress=False, log=lambda s: None)
+    assert not resume_path(out).exists()

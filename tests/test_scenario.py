@@ -63,6 +63,7 @@ def test_good_scenario_loads_with_per_method_settings(tmp_path: Path) -> None:
          "subsims.a.model", "not found"),
         ('transform = "gain"', 'transform = "warp"', "couplings[0]", "unknown transform 'warp'"),
         ("stop = 1.0", "stop = -1.0", "stop", "after start"),
+        ("stop = 1.0", "stop = inf", "stop", "must be a finite number, got inf"),  # (it ran until killed: red team)
         ("stop = 1.0", "", "stop", "is required: stop = <a number>"),
         # no interval fits every model (the old default, 1 s, ran a 0.4 s-period oscillator 6 times off, exit 0)
         ("interval = 0.1", "", "coupling.interval", 'is required: the convergence interval in s, short against'),

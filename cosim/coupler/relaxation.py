@@ -326,6 +326,7 @@ class Relaxation:
         self._magnitudes: dict[str, np.ndarray] = {}  # interval = "auto": largest |input| per channel so far
         self._next_length: float | None = None  # interval = "auto": the length of the interval after the last one
         self._ceiling: tuple[float, int] = (math.inf, 0)  # interval = "auto": (ceiling, patience), see _auto_run
+        self._give_up_early = False  # interval = "auto", above interval_min: a diverging try is retried shorter at once
         self.resume_point: ResumePoint | None = None  # at the last Commit (None: not a point to go on from)
 
     def _action(self, stage: int, times: np.ndarray, inputs: dict[str, dict[str, np.ndarray]]) -> Run:
@@ -405,6 +406,7 @@ class Relaxation:
                     t1 = t_stop
                 clipped = t1 != t + H  # cut to end at t_stop: a run going further would not end an interval there
                 times = sample_times(t, t1, s.samples)
+                self._give_up_early = H > control.minimum  # (at interval_min a try given up ends the run)
                 try:
                     interval = yield from self._converge(times)
                 except (NotConverged, Diverged) as failed:
@@ -555,7 +557,7 @@ class Relaxation:
                 result = self._check(flat, last_stage, history)
                 if result.converged:
                     return Interval(times, outputs, inputs, stage + 1, history)
-                if s.auto is not None and _diverging(history, result.failing):  # retried shorter: no use going on
+                if self._give_up_early and _diverging(history, result.failing):  # retried shorter: no use going on
                     raise NotConverged(float(times[0]), float(times[-1]), stage + 1, result.failing, history)
             last_stage = flat
             inputs = {k: c.evaluate(outputs, w, n) for k, c, w in self._all}
@@ -603,7 +605,7 @@ class Relaxation:
                 result = self._check(new, fed_back, history)
                 if result.converged:
                     return Interval(times, outputs, inputs, stage + 1, history)
-                if s.auto is not None and _diverging(history, result.failing):  # retried shorter: no use going on
+                if self._give_up_early and _diverging(history, result.failing):  # retried shorter: no use going on
                     raise NotConverged(float(times[0]), float(times[-1]), stage + 1, result.failing, history)
             fed_back = new
         raise NotConverged(float(times[0]), float(times[-1]), s.max_stages, result.failing, history)
