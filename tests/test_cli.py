@@ -354,3 +354,20 @@ def test_a_stopped_runs_note_names_where_its_intervals_are(tmp_path: Path) -> No
     assert _kept(npz) == f"{stream_path(npz)} (`cosim recover {npz}` builds the NPZ from it)"
     npz.write_bytes(b"built")
     assert _kept(npz) == str(npz)
+
+
+def test_the_rejected_tries_of_fixed_intervals_are_said_as_halvings(tmp_path: Path) -> None:
+    """With max_halvings (fixed intervals) the line read '(5 not converged, 0 over interval_tol)': no interval_tol
+    there (red team)."""
+    text = OSCILLATOR.read_text().replace("interval = 0.05          # H, seconds", "interval = 0.8\nmax_halvings = 6")
+    (tmp_path / "halve.toml").write_text(text)
+    out = tmp_path / "h.csv"
+    done = subprocess.run([*COSIM, "run", str(tmp_path / "halve.toml"), "--inprocess", "--quiet", "--stop", "0.8",
+                           "--output", str(out)], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    cols, diag = read_results(Path(str(out) + ".diag.csv"))
+    halvings = int(diag[:, cols.index("halvings")].sum())
+    assert halvings > 0
+    assert re.search(rf"^rejected: {halvings} tries, retried shorter \(not converged: max_halvings\), \d+ stages run "
+                     "in them$", done.stdout, re.M), done.stdout
+    assert "interval_tol" not in done.stdout
