@@ -409,7 +409,7 @@ def recover(path: Path) -> str:
             write_npz(path, columns, units, data)
             stream.unlink()
             cut = _cut_torn_row(diag_path(path))
-            return f"{path}: {_span(data)} recovered from {stream.name}{cut}"
+            return f"{path}: {_span(data)} recovered from {stream.name}{cut}{_disagreement(path, data)}"
         if not path.exists():
             raise OutputError(f"{path} does not exist: nothing to recover")
         _check_header(path, "time")  # before anything is cut: never shorten a file that is not ours
@@ -419,7 +419,7 @@ def recover(path: Path) -> str:
             _, data = read_results(path)
         except (ValueError, OSError) as exc:
             raise OutputError(f"{path}: not a cosim result file ({exc})") from None
-        return f"{path}: {_span(data)}{cut or ' (complete)'}{cut_diag}"
+        return f"{path}: {_span(data)}{cut or ' (complete)'}{cut_diag}{_disagreement(path, data)}"
     finally:
         lock.release()
 
@@ -483,6 +483,24 @@ def _check_header(path: Path, first: str) -> None:
     if not _has_header(path, first):
         raise OutputError(f"{path}: not a cosim result file (its first line is not a header starting with "
                           f"'{first},'): left as it was")
+
+
+def _disagreement(path: Path, data: np.ndarray) -> str:
+    """A note when the diagnostics end at another interval than the results (a kill between an interval's two
+    writes), else ''."""
+    diag = diag_path(path)
+    if not data.shape[0] or not _has_header(diag, "interval"):
+        return ""
+    try:
+        header, rows = read_results(diag)
+    except (ValueError, OSError, StopIteration):
+        return ""
+    end = float(rows[-1, header.index("t1")]) if rows.shape[0] else None
+    if end == float(data[-1, 0]):
+        return ""
+    said = "none" if end is None else f"t = {end:.6g} s"
+    return (f"; its diagnostics end at {said}, the results at t = {data[-1, 0]:.6g} s (it was stopped between an "
+            "interval's two writes): --resume (or --overwrite) makes them agree")
 
 
 def _span(data: np.ndarray) -> str:

@@ -323,6 +323,22 @@ def test_recover_cuts_a_torn_csv_row(tmp_path: Path) -> None:
     assert_whole_intervals(out)
 
 
+def test_recover_says_when_the_results_and_diagnostics_end_at_different_intervals(tmp_path: Path) -> None:
+    """A kill between an interval's two writes leaves its rows without its diagnostics row; `cosim recover` said
+    '(complete)' of it (durability probe)."""
+    out = tmp_path / "r.csv"
+    assert cosim("run", str(OSCILLATOR), "--stop", "0.2", "--output", str(out), "--inprocess").returncode == 0
+    assert "diagnostics end" not in cosim("recover", str(out)).stdout  # the two agree
+    diag = Path(f"{out}.diag.csv")
+    lines = diag.read_text().splitlines()
+    diag.write_text("\n".join(lines[:-1]) + "\n")  # the last interval's row never written
+    done = cosim("recover", str(out))
+    assert done.returncode == 0
+    assert (f"(complete); its diagnostics end at t = {float(lines[-2].split(',')[2]):.6g} s, the results at t = 0.2 s "
+            "(it was stopped between an interval's two writes): --resume (or --overwrite) makes them agree") \
+        in done.stdout, done.stdout
+
+
 @pytest.mark.parametrize(("name", "content", "words"), [
     ("victim.toml", b'name = "x"\nstop = 2.0', "is not a result file: cosim writes .csv or .npz"),
     ("notes.csv", b"a,b\n1,2\n3,", "not a cosim result file (its first line is not a header starting with 'time,')"),
