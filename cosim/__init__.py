@@ -11,14 +11,16 @@ if TYPE_CHECKING:
     from cosim.api import run as run
     from cosim.purity import ImpureModel, check_pure
     from cosim.signals import Segment
-    from cosim.subsim import ModelError, Param, Port, Subsim
+    from cosim.subsim import IntervalTooLong, ModelError, Param, Port, Subsim
 
-__all__ = ["ImpureModel", "ModelError", "Param", "Port", "Segment", "Subsim", "check_pure"]  # (cosim.run: not in *)
+# (cosim.run: not in *)
+__all__ = ["ImpureModel", "IntervalTooLong", "ModelError", "Param", "Port", "Segment", "Subsim", "check_pure"]
 
 # Each name's module, imported on first use: ``import cosim.<anything>`` then loads no NumPy on its own (the
 # ``cosim`` command answers Ctrl-C while it loads), and a subsim process never loads cosim.run's coordinator side.
 _HOME = {"ImpureModel": "cosim.purity", "check_pure": "cosim.purity", "Segment": "cosim.signals",
-         "ModelError": "cosim.subsim", "Param": "cosim.subsim", "Port": "cosim.subsim", "Subsim": "cosim.subsim",
+         "ModelError": "cosim.subsim", "IntervalTooLong": "cosim.subsim", "Param": "cosim.subsim",
+         "Port": "cosim.subsim", "Subsim": "cosim.subsim",
          "run": "cosim.api"}
 
 

@@ -25,6 +25,7 @@ ERROR_CODES: dict[str, str] = {
     "stale_trial": "the latest trial did not start from the current committed state",
     "not_in_history": "rollback target time is not in the committed history",
     "model_error": "the model could not advance (e.g. a singularity); nothing committed changed",
+    "too_long": "the model asks for a shorter interval (an FMU discarded its step); nothing committed changed",
     "model_exception": "the model raised an unexpected exception (a bug in it); the error carries its traceback; "
                        "nothing committed changed",
     "internal": "unexpected failure inside the subsim; nothing committed changed",

@@ -27,7 +27,6 @@ from cosim.coupler.couplings import Coupling, check_units
 from cosim.coupler.plan import Plan
 from cosim.coupler.relaxation import (
     Commit,
-    Diverged,
     Done,
     Interval,
     Outputs,
@@ -40,6 +39,7 @@ from cosim.coupler.relaxation import (
     Settings,
     StageDone,
     Steps,
+    TooLong,
     sample_times,
 )
 from cosim.handles import Description, IntervalResult, SubsimHandle, SubsimState
@@ -308,32 +308,37 @@ class Coordinator:
         restarts_before = len(self.restarts)
         reply: Outputs | None = None
         retry = False
-        diverged: Diverged | None = None
+        too_long: TooLong | None = None
         while True:
             try:
-                if diverged is not None:  # the machine retries shorter (interval = "auto"), or it comes back out
-                    action = steps.throw(diverged)
+                if too_long is not None:  # the machine retries shorter (interval = "auto"), or it comes back out
+                    action = steps.throw(too_long)
                 else:
                     action = steps.throw(RetryInterval()) if retry else steps.send(reply)
             except StopIteration as stop:
                 return stop.value
-            except Diverged as unhandled:
+            except TooLong as unhandled:
                 raise unhandled.error from None
-            reply, retry, diverged = None, False, None
+            reply, retry, too_long = None, False, None
             if isinstance(action, Run):
                 try:
                     reply = self._run(action)
                 except _Replaced:
                     retry = True
                 except SubsimError as exc:
+                    shorter = "interval_min" if self.settings.auto is not None else "interval"
+                    if exc.code == "too_long":  # the model asked for shorter steps
+                        exc.add_note(f"a shorter [coupling] {shorter} is the cure (interval = \"auto\" or "
+                                     "max_halvings shortens only the intervals that need it)")
+                        too_long = TooLong(exc, action.stage)
+                        continue
                     if action.stage > 0 and exc.code in ("model_error", "bad_value") and \
                             ("not finite" in exc.message or "NaN or inf" in exc.message):  # (the runtime's words)
                         exc.add_note(f"it was at stage {action.stage} of the interval [{action.times[0]:g}, "
                                      f"{action.times[-1]:g}], on inputs the coupling iteration made: if that iteration "
-                                     "diverged (values growing stage by stage), a shorter [coupling] "
-                                     f"{'interval_min' if self.settings.auto is not None else 'interval'} is the "
-                                     "cure")
-                        diverged = Diverged(exc, action.stage)
+                                     f"diverged (values growing stage by stage), a shorter [coupling] {shorter} is "
+                                     "the cure")
+                        too_long = TooLong(exc, action.stage)
                         continue
                     raise
             elif isinstance(action, StageDone):

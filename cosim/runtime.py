@@ -20,7 +20,7 @@ import numpy as np
 
 from cosim.contract import PROTOCOL_VERSION, CosimError
 from cosim.signals import SegmentError, check_scheme, check_time_grid, interpolant
-from cosim.subsim import ModelError, Port, Subsim, as_ports, resolve_params
+from cosim.subsim import IntervalTooLong, ModelError, Port, Subsim, as_ports, resolve_params
 
 DEFAULT_HISTORY = 32
 
@@ -188,7 +188,7 @@ def as_factory(model: Subsim | ModelFactory) -> ModelFactory:
     raise TypeError(f"a subsim model must be a Subsim instance or a factory making one, got {model!r}")
 
 
-MODEL_FAULTS = frozenset({"model_error", "model_exception"})  # error codes that are the model's, not the caller's
+MODEL_FAULTS = frozenset({"model_error", "too_long", "model_exception"})  # codes that are the model's, not the caller's
 
 
 class Runtime:
@@ -329,6 +329,8 @@ class Runtime:
         before = _attribute_marks(self.model) if watched else None
         try:
             result = self.model.advance(state, times, u)
+        except IntervalTooLong as exc:
+            raise CosimError("too_long", f"at t in [{times[0]}, {times[-1]}]: {exc}") from None
         except ModelError as exc:
             raise CosimError("model_error", f"at t in [{times[0]}, {times[-1]}]: {exc}") from None
         except Exception as exc:

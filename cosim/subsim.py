@@ -118,6 +118,12 @@ class ModelError(RuntimeError):
     """Raised by a model when it cannot advance (e.g. an attitude singularity); reported, not fatal."""
 
 
+class IntervalTooLong(ModelError):
+    """Raised by a model that cannot take this interval's steps but would take shorter ones (an FMU discarding its
+    step). With ``interval = "auto"`` or ``max_halvings`` the coordinator retries the interval shorter; otherwise
+    the run stops, saying so."""
+
+
 class Subsim:
     """Base class of a subsystem simulation model.
 

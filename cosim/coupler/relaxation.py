@@ -214,10 +214,12 @@ def _trend(r: Sequence[float]) -> str:
     return "growing" if recent > 1.2 * before else "falling" if recent < 0.7 * before else "stalled"
 
 
-class Diverged(Exception):
-    """Thrown into a running stream by a driver whose run at stage 1 or later failed on a value the coupling
-    iteration made non-finite (``error``, a subsim's error). With ``interval = "auto"`` (or ``max_halvings``) the
-    try is rolled back and retried shorter, as one that did not converge; otherwise it comes back out."""
+class TooLong(Exception):
+    """Thrown into a running stream by a driver whose run failed in a way a shorter interval cures (``error``, a
+    subsim's error): a value the coupling iteration made non-finite (at stage 1 or later), or a model that asked for
+    a shorter interval (``too_long``: an FMU that discarded its step). With ``interval = "auto"`` (or
+    ``max_halvings``) the try is rolled back and retried shorter, as one that did not converge; otherwise it comes
+    back out."""
 
     def __init__(self, error: BaseException, stage: int) -> None:
         super().__init__(str(error))
@@ -373,7 +375,7 @@ class Relaxation:
             try:
                 interval = yield from self._converge(times)
                 break
-            except (NotConverged, Diverged) as failed:
+            except (NotConverged, TooLong) as failed:
                 yield Rollback(float(times[0]), float(times[-1]))
                 if halvings == s.max_halvings:
                     raise
@@ -409,7 +411,7 @@ class Relaxation:
                 self._give_up_early = H > control.minimum  # (at interval_min a try given up ends the run)
                 try:
                     interval = yield from self._converge(times)
-                except (NotConverged, Diverged) as failed:
+                except (NotConverged, TooLong) as failed:
                     yield Rollback(t, t1)
                     if H <= control.minimum:
                         raise
@@ -447,7 +449,7 @@ class Relaxation:
         summary.unconverged, summary.rejected_stages = self.unconverged - unconverged, \
             self.rejected_stages - rejected_stages
 
-    def _count_rejected(self, failed: NotConverged | Diverged) -> None:
+    def _count_rejected(self, failed: NotConverged | TooLong) -> None:
         self.unconverged += 1
         self.rejected_stages += failed.stages if isinstance(failed, NotConverged) else failed.stage + 1
 

@@ -102,15 +102,18 @@ def _run(cmd: list[str]) -> str:
 
 
 def compile_binary(work: Path, version: int, state: bool = True, identifier: str = "mass",
-                   float32: bool = False, step_event_at: float | None = None, warn_at: float | None = None) -> Path:
+                   float32: bool = False, step_event_at: float | None = None, warn_at: float | None = None,
+                   discard_above: float | None = None) -> Path:
     """``<identifier>.so`` of the mass model for FMI ``version`` (``float32``: see :func:`model_description`;
     ``step_event_at``, FMI 2: model exchange asks for event mode at the first integrator step from then on;
-    ``warn_at``: every co-simulation step from then on logs a warning and returns the Warning status)."""
+    ``warn_at``: every co-simulation step from then on logs a warning and returns the Warning status;
+    ``discard_above``: a co-simulation step longer than this is discarded, nothing stepped)."""
     work.mkdir(parents=True, exist_ok=True)
     obj = work / f"mass_fmi{version}.o"
     flags = ["-O2", "-fPIC", "-Wall", "-Werror", f"-I{HEADERS}", f"-I{CSRC}", f"-DMASS_STATE={int(state)}",
              f"-DMASS_F32={int(float32)}", f"-DMASS_STEP_EVENT_AT={-1.0 if step_event_at is None else step_event_at!r}",
-             f"-DMASS_WARN_AT={-1.0 if warn_at is None else warn_at!r}"]
+             f"-DMASS_WARN_AT={-1.0 if warn_at is None else warn_at!r}",
+             f"-DMASS_DISCARD_ABOVE={0.0 if discard_above is None else discard_above!r}"]
     _run(["gcc", *flags, "-c", str(CSRC / f"mass_fmi{version}.c"), "-o", str(obj)])
     defined = set(_run(["nm", "-g", "--defined-only", str(obj)]).split())
     stubs = [f for f in _standard_functions(version) if f not in defined]
@@ -135,11 +138,12 @@ def write_fmu(path: Path, xml: str | None, binaries: dict[str, Path], extra: dic
 
 
 def build_mass_fmu(out: Path, version: int = 2, state: bool = True, name: str | None = None,
-                   float32: bool = False, step_event_at: float | None = None, warn_at: float | None = None) -> Path:
+                   float32: bool = False, step_event_at: float | None = None, warn_at: float | None = None,
+                   discard_above: float | None = None) -> Path:
     """Compile and package the mass FMU; returns the path of the ``.fmu`` (options: :func:`compile_binary`)."""
     name = name or f"mass{version}{'' if state else '_nostate'}{'_f32' if float32 else ''}"
     so = compile_binary(out / f"build-{name}", version, state, float32=float32, step_event_at=step_event_at,
-                        warn_at=warn_at)
+                        warn_at=warn_at, discard_above=discard_above)
     return write_fmu(out / f"{name}.fmu", model_description(version, state, float32=float32), {PLATFORM[version]: so})
 
 

@@ -34,6 +34,7 @@ INTERFACES = {"cs": "coSimulation", "me": "modelExchange"}
 REAL_TYPES = {"Real", "Float64", "Float32"}
 INT_TYPES = {"Integer", "Enumeration", "Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32", "Int64", "UInt64"}
 FLOAT32_MAX = 3.4028234663852886e38
+DISCARD = 2  # fmi2Discard, fmi3Discard
 LOG_SHOWN = 20  # distinct warnings of one FMU instance printed; the rest are counted, not shown
 
 
@@ -52,7 +53,12 @@ class FmuError(ValueError):
 
 
 class FmiCallError(RuntimeError):
-    """An FMI call failed while the FMU ran (the FMU's own last log message is appended when it gave one)."""
+    """An FMI call failed while the FMU ran (the FMU's own last log message is appended when it gave one).
+    ``discard``: it returned Discard (a step the FMU would take shorter)."""
+
+    def __init__(self, message: str, discard: bool = False) -> None:
+        super().__init__(message)
+        self.discard = discard
 
 
 def require_fmpy() -> None:
@@ -383,7 +389,7 @@ class Instance:
         try:
             return fn(*args)
         except Exception as exc:  # FMPy raises FMICallException for a failed call, Exception for others
-            raise FmiCallError(f"{what}: {self._why(exc)}") from None
+            raise FmiCallError(f"{what}: {self._why(exc)}", getattr(exc, "status", None) == DISCARD) from None
 
     # --- life cycle
     def initialize(self, values: dict[str, Any], t0: float, tolerance: float | None) -> None:

@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 from scipy.integrate import BDF, DOP853, LSODA, RK23, RK45, Radau
 
-from cosim.subsim import InputFunction, ModelError, Port, Subsim, closest
+from cosim.subsim import InputFunction, IntervalTooLong, ModelError, Port, Subsim, closest
 from subsims.fmu.fmu import FmiCallError, FmuError, FmuInfo, Instance, RealPorts, coerce, read_fmu
 
 SETTINGS = {"fmu", "interface", "substeps", "solver", "rtol", "atol", "max_step", "tolerance", "state_capacity",
@@ -263,8 +263,8 @@ class FmuSubsim(Subsim):
             else:
                 outputs = self._advance_me(inst, times, u)
             end = inst.serialize()
-        except FmiCallError as exc:
-            raise ModelError(str(exc)) from None
+        except FmiCallError as exc:  # a discarded step: the interval again, shorter (with "auto" or max_halvings)
+            raise (IntervalTooLong if exc.discard else ModelError)(str(exc)) from None
         names = [v.name for v in self.info.outputs]
         return {n: outputs[:, i : i + 1] for i, n in enumerate(names)}, encode_state(end, self.capacity)
 

@@ -26,7 +26,8 @@ def _needs_gcc() -> None:
 @pytest.fixture(scope="session")
 def fmus(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     """``mass2``, ``mass3`` (FMI 2.0 / 3.0, CS + ME, state serialization), ``mass2_warn``, ``mass3_warn`` (every
-    step from t = 0.25 logs a warning), ``mass2_alias`` (x0 is u0), ``mass3_extras`` (variables cosim does not use,
+    step from t = 0.25 logs a warning), ``mass2_discard``, ``mass3_discard`` (a step longer than 0.02 s is
+    discarded), ``mass2_alias`` (x0 is u0), ``mass3_extras`` (variables cosim does not use,
     and sized integer and Float32 parameters), ``misnamed_binary``, ``mass2_nostate``,
     ``mass3_nostate`` (cannot save state), ``mass3_f32`` (v and F are Float32), ``mass2_step_event`` (model
     exchange asks for event mode at its first integrator step from t = 0.25), and broken ones:
@@ -39,6 +40,8 @@ def fmus(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     built["mass3_f32"] = build_mass.build_mass_fmu(out, 3, float32=True)
     built["mass2_step_event"] = build_mass.build_mass_fmu(out, 2, name="mass2_step_event", step_event_at=0.25)
     built.update({f"mass{v}_warn": build_mass.build_mass_fmu(out, v, name=f"mass{v}_warn", warn_at=0.25)
+                  for v in (2, 3)})
+    built.update({f"mass{v}_discard": build_mass.build_mass_fmu(out, v, name=f"mass{v}_discard", discard_above=0.02)
                   for v in (2, 3)})
     so = out / "build-mass2" / "mass.so"
     xml = build_mass.model_description(2)

@@ -8,11 +8,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cosim.contract import CosimError
+from cosim.contract import CosimError, SubsimError
+from cosim.results import read_results
 from cosim.runtime import Runtime
 from subsims.fmu.fmu import LOG_SHOWN, FmiCallError, FmuError, Instance, Variable, coerce, read_fmu
 from subsims.fmu.subsim import FmuSubsim
 
+ROOT = Path(__file__).resolve().parents[2]
 T = np.linspace(0.0, 0.4, 5)  # steps at 0, 0.1, 0.2, 0.3: the FMUs warn from t = 0.25 on
 
 
@@ -139,3 +141,47 @@ def test_an_fmu_that_cannot_save_its_state_is_not_called_a_bad_parameter(fmus: d
         Runtime(FmuSubsim).configure({"fmu": str(fmus["bad_binary"])})
     assert err.value.code == "model_error" and err.value.message.startswith("configure: ") \
         and "cannot load the binary" in err.value.message
+
+
+@pytest.mark.parametrize("version", [2, 3])
+def test_a_step_the_fmu_discards_asks_for_a_shorter_interval_and_changes_nothing(fmus: dict[str, Path],
+                                                                                 version: int) -> None:
+    """fmi2Discard (FMI 3: Discard) was a model error that ended the run; FMI's meaning is 'try a shorter step'."""
+    rt = Runtime(FmuSubsim)
+    rt.configure({"fmu": str(fmus[f"mass{version}_discard"]), "u0": 0.5})
+    committed = rt.state.copy()
+    with pytest.raises(CosimError) as err:
+        rt.run_interval(T, {"F": np.zeros((5, 1))})  # steps of 0.1 s
+    assert err.value.code == "too_long" and "(discard)" in err.value.message
+    assert "step too long for the spring" in err.value.message
+    assert np.array_equal(rt.state, committed)
+    out = rt.run_interval(np.linspace(0.0, 0.04, 5), {"F": np.zeros((5, 1))})  # steps of 0.01 s: taken
+    assert out["outputs"]["u"][0, 0] == 0.5
+
+
+def _mixed(tmp_path: Path, fmu: Path, interval: str) -> Path:
+    text = (ROOT / "scenarios" / "fmu" / "oscillator_mixed.toml").read_text()
+    text = text.replace('fmu = "mass3.fmu"', f'fmu = "{fmu}"').replace('interface = "me", ', "")
+    text = text.replace("interval = 0.01", f"interval = {interval}")
+    scenario = tmp_path / "mixed.toml"
+    scenario.write_text(text)
+    return scenario
+
+
+def test_with_automatic_intervals_a_discarded_step_is_taken_again_shorter(fmus: dict[str, Path],
+                                                                          tmp_path: Path) -> None:
+    from cosim.runner import run_scenario
+    from cosim.scenario import load
+
+    fixed = _mixed(tmp_path, fmus["mass2_discard"], "0.1")  # 0.025 s between samples: every step discarded
+    with pytest.raises(SubsimError) as err:
+        run_scenario(load(fixed), stop=0.3, output=tmp_path / "f.csv", inprocess=True, progress=False,
+                     log=lambda m: None)
+    assert err.value.code == "too_long"
+    assert "a shorter [coupling] interval is the cure" in "".join(getattr(err.value, "__notes__", []))
+    auto = _mixed(tmp_path, fmus["mass2_discard"], '"auto"\ninterval_initial = 0.1')
+    report = run_scenario(load(auto), stop=0.3, output=tmp_path / "a.csv", inprocess=True, progress=False,
+                          log=lambda m: None)
+    assert report.summary.t_end == 0.3 and report.summary.unconverged >= 1  # the discarded tries, retried shorter
+    cols, diag = read_results(tmp_path / "a.csv.diag.csv")
+    assert (diag[:, cols.index("length_s")] / 4 <= 0.02 + 1e-15).all()  # every step taken is one it accepts
