@@ -11,6 +11,7 @@ import time
 import uuid
 from pathlib import Path
 
+import numpy as np
 import pytest
 from terminal import as_from_a_terminal
 
@@ -302,6 +303,17 @@ def test_what_a_model_prints_is_on_stderr_under_its_subsims_name(tmp_path: Path)
         assert f"{name}: bytes from 2" in lines and f"{name}: {'.' * 20000}" in lines, done.stderr
 
 
+def _run_in_process(tmp_path: Path, scenario: str, stop: str) -> tuple[subprocess.CompletedProcess, list, np.ndarray]:
+    """``cosim run`` of the ``scenario`` text in one process to ``stop``: the finished command and its diagnostics."""
+    (tmp_path / "s.toml").write_text(scenario)
+    out = tmp_path / "s.csv"
+    done = subprocess.run([*COSIM, "run", str(tmp_path / "s.toml"), "--inprocess", "--quiet", "--stop", stop,
+                           "--output", str(out)], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    cols, diag = read_results(Path(str(out) + ".diag.csv"))
+    return done, cols, diag
+
+
 def test_the_summary_counts_the_rejected_tries_and_the_intervals_over_interval_tol(tmp_path: Path) -> None:
     """An automatic run on a coupling too stiff for its first intervals: its tries rolled back and those accepted
     above interval_tol at interval_min were in the diagnostics only; the summary says how many (the same counts)."""
@@ -309,12 +321,7 @@ def test_the_summary_counts_the_rejected_tries_and_the_intervals_over_interval_t
     text = text.replace("interval = 0.05          # H, seconds", 'interval = "auto"').replace("max_stages = 50", "")
     text = text.replace("k = 197.39208802178717", "k = 39517.89602196179")  # k1 + k12, k12 = 4000 pi^2
     text = text.replace("k = 157.91367041742973", "k = 39478.41760435743")
-    (tmp_path / "stiff.toml").write_text(text)
-    out = tmp_path / "s.csv"
-    done = subprocess.run([*COSIM, "run", str(tmp_path / "stiff.toml"), "--inprocess", "--quiet", "--stop", "0.2",
-                           "--output", str(out)], capture_output=True, text=True, timeout=120)
-    assert done.returncode == 0, done.stderr
-    cols, diag = read_results(Path(str(out) + ".diag.csv"))
+    done, cols, diag = _run_in_process(tmp_path, text, "0.2")
     rejected = int(diag[:, cols.index("halvings")].sum())
     over = int((diag[:, cols.index("error")] > 1.0).sum())
     found = re.search(r"^rejected: (\d+) tries, retried shorter \((\d+) not converged, (\d+) over interval_tol\), "
@@ -360,12 +367,7 @@ def test_the_rejected_tries_of_fixed_intervals_are_said_as_halvings(tmp_path: Pa
     """With max_halvings (fixed intervals) the line read '(5 not converged, 0 over interval_tol)': no interval_tol
     there (red team)."""
     text = OSCILLATOR.read_text().replace("interval = 0.05          # H, seconds", "interval = 0.8\nmax_halvings = 6")
-    (tmp_path / "halve.toml").write_text(text)
-    out = tmp_path / "h.csv"
-    done = subprocess.run([*COSIM, "run", str(tmp_path / "halve.toml"), "--inprocess", "--quiet", "--stop", "0.8",
-                           "--output", str(out)], capture_output=True, text=True, timeout=120)
-    assert done.returncode == 0, done.stderr
-    cols, diag = read_results(Path(str(out) + ".diag.csv"))
+    done, cols, diag = _run_in_process(tmp_path, text, "0.8")
     halvings = int(diag[:, cols.index("halvings")].sum())
     assert halvings > 0
     assert re.search(rf"^rejected: {halvings} tries, retried shorter \(not converged: max_halvings\), \d+ stages run "
