@@ -66,6 +66,22 @@ static int mass_initialize(MassData *d) {
     return 0;
 }
 
+/* Test options, set at build time: with MASS_DISCARD_ABOVE = h > 0 a co-simulation step longer than h is discarded,
+ * nothing stepped (the caller may try a shorter one); with MASS_WARN_AT = t >= 0 every step from t on logs a warning
+ * and returns the Warning status (its result stands). */
+#ifndef MASS_DISCARD_ABOVE
+#define MASS_DISCARD_ABOVE 0.0
+#endif
+#ifndef MASS_WARN_AT
+#define MASS_WARN_AT -1.0
+#endif
+#define MASS_DISCARD_MESSAGE "step too long for the spring"
+#define MASS_WARN_MESSAGE "spring beyond its rated stroke"
+
+static int mass_discards(double h) { return MASS_DISCARD_ABOVE > 0.0 && h > MASS_DISCARD_ABOVE; }
+
+static int mass_warns(double t) { return MASS_WARN_AT >= 0.0 && t >= MASS_WARN_AT; }
+
 /* Exact solution over h with F constant: oscillation about u_eq = F / k. */
 static void mass_step(MassData *d, double h) {
     double w = sqrt(d->k / d->m), ueq = d->F / d->k;

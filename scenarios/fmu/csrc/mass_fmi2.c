@@ -127,31 +127,20 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[], size
 }
 
 /* co-simulation */
-/* Built with MASS_DISCARD_ABOVE = h > 0, a step longer than h is discarded (fmi2Discard), nothing stepped. */
-#ifndef MASS_DISCARD_ABOVE
-#define MASS_DISCARD_ABOVE 0.0
-#endif
-
-/* Built with MASS_WARN_AT = t >= 0, every step from t on logs a warning and returns fmi2Warning (a valid result). */
-#ifndef MASS_WARN_AT
-#define MASS_WARN_AT -1.0
-#endif
-
 fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean noSetPrior) {
     Instance *inst = c;
-    double warn_at = MASS_WARN_AT;
     (void)noSetPrior;
     if (!(h >= 0.0)) return fail(inst, "negative step");
-    if (MASS_DISCARD_ABOVE > 0.0 && h > MASS_DISCARD_ABOVE) {
+    if (mass_discards(h)) { /* nothing stepped */
         if (inst->cb.logger) inst->cb.logger(inst->cb.componentEnvironment, inst->name, fmi2Discard, "logStatusDiscard",
-                                             "step too long for the spring");
-        return fmi2Discard; /* nothing stepped: the caller may try a shorter step */
+                                             MASS_DISCARD_MESSAGE);
+        return fmi2Discard;
     }
     inst->d.time = t;
     mass_step(&inst->d, h);
-    if (warn_at >= 0.0 && t >= warn_at) {
+    if (mass_warns(t)) {
         if (inst->cb.logger) inst->cb.logger(inst->cb.componentEnvironment, inst->name, fmi2Warning, "logStatusWarning",
-                                             "spring beyond its rated stroke");
+                                             MASS_WARN_MESSAGE);
         return fmi2Warning;
     }
     return fmi2OK;

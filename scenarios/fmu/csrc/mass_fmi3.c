@@ -181,38 +181,24 @@ fmi3Status fmi3DeserializeFMUState(fmi3Instance c, const fmi3Byte bytes[], size_
 /* co-simulation */
 fmi3Status fmi3EnterStepMode(fmi3Instance c) { (void)c; return fmi3OK; }
 
-/* Built with MASS_DISCARD_ABOVE = h > 0, a step longer than h is discarded (fmi3Discard), nothing stepped. */
-#ifndef MASS_DISCARD_ABOVE
-#define MASS_DISCARD_ABOVE 0.0
-#endif
-
-/* Built with MASS_WARN_AT = t >= 0, every step from t on logs a warning and returns fmi3Warning (a valid result). */
-#ifndef MASS_WARN_AT
-#define MASS_WARN_AT -1.0
-#endif
-
 fmi3Status fmi3DoStep(fmi3Instance c, fmi3Float64 t, fmi3Float64 h, fmi3Boolean noSetPrior, fmi3Boolean *eventNeeded,
                       fmi3Boolean *terminate, fmi3Boolean *earlyReturn, fmi3Float64 *lastTime) {
     Instance *inst = c;
     (void)noSetPrior;
-    double warn_at = MASS_WARN_AT;
     if (!(h >= 0.0)) return fail(inst, "negative step");
-    if (MASS_DISCARD_ABOVE > 0.0 && h > MASS_DISCARD_ABOVE) {
-        if (inst->log) inst->log(inst->env, fmi3Discard, "logStatusDiscard", "step too long for the spring");
-        *eventNeeded = fmi3False;
-        *terminate = fmi3False;
-        *earlyReturn = fmi3False;
-        *lastTime = t;
-        return fmi3Discard; /* nothing stepped: the caller may try a shorter step */
-    }
-    inst->d.time = t;
-    mass_step(&inst->d, h);
     *eventNeeded = fmi3False;
     *terminate = fmi3False;
     *earlyReturn = fmi3False;
+    if (mass_discards(h)) { /* nothing stepped */
+        *lastTime = t;
+        if (inst->log) inst->log(inst->env, fmi3Discard, "logStatusDiscard", MASS_DISCARD_MESSAGE);
+        return fmi3Discard;
+    }
+    inst->d.time = t;
+    mass_step(&inst->d, h);
     *lastTime = inst->d.time;
-    if (warn_at >= 0.0 && t >= warn_at) {
-        if (inst->log) inst->log(inst->env, fmi3Warning, "logStatusWarning", "spring beyond its rated stroke");
+    if (mass_warns(t)) {
+        if (inst->log) inst->log(inst->env, fmi3Warning, "logStatusWarning", MASS_WARN_MESSAGE);
         return fmi3Warning;
     }
     return fmi3OK;
