@@ -343,17 +343,23 @@ def test_a_subsim_that_timed_out_is_killed_at_once_when_stopped(cosim_bus: Bus) 
     assert proc.stop() == -signal.SIGKILL
 
 
+def test_the_installed_eclipse_zenoh_is_read_as_pip_records_it() -> None:
+    import importlib.metadata
+
+    from cosim.protocol.transport.session import installed_zenoh
+
+    assert installed_zenoh() == importlib.metadata.version("eclipse-zenoh")
+
+
 @pytest.mark.parametrize(("installed", "refused"), [("1.0.4", True), ("1.9.9", True), ("2.0.0", True),
                                                     ("1.10.0", False), ("1.10.2", False), ("1.12.0rc1", False)])
 def test_an_eclipse_zenoh_this_transport_is_not_written_for_is_named_in_one_line(
         monkeypatch: pytest.MonkeyPatch, installed: str, refused: bool) -> None:
     """A subsim on a machine with eclipse-zenoh 1.0.4 said 'serving run', then printed 1,372 TypeError tracebacks in
     15 s, and the coordinator asked whether it had this run's COSIM_SECRET (version-skew probe)."""
-    import importlib.metadata
-
     from cosim.protocol.transport import session
 
-    monkeypatch.setattr(importlib.metadata, "version", lambda name: installed)
+    monkeypatch.setattr(session, "installed_zenoh", lambda: installed)
     said = session.zenoh_mismatch()
     assert (said is not None) == refused
     if refused:
@@ -362,7 +368,7 @@ def test_an_eclipse_zenoh_this_transport_is_not_written_for_is_named_in_one_line
 
 
 def test_a_subsim_process_on_an_old_eclipse_zenoh_exits_with_that_line_before_serving() -> None:
-    older = ("import sys, importlib.metadata as m; m.version = lambda name: '1.0.4'\n"
+    older = ("import sys, cosim.protocol.transport.session as s; s.installed_zenoh = lambda: '1.0.4'\n"
              "from cosim.serve import main; sys.exit(main(sys.argv[1:]))\n")
     done = subprocess.run([sys.executable, "-c", older, "subsims.oscillator.subsim:Mass", "--connect",
                            "tcp/127.0.0.1:9", "--run", "r1", "--name", "m"], capture_output=True, text=True, timeout=60,
