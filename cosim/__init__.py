@@ -3,9 +3,15 @@
 from __future__ import annotations
 
 import importlib
+import warnings
 from typing import TYPE_CHECKING, Any
 
 from cosim.contract import VERSION as __version__  # noqa: F401  (the contract imports nothing: still no NumPy)
+
+# NumPy's floating-point warnings from cosim's own arithmetic on coupled values (interpolating the inputs of a
+# diverging iteration, transforming them, checking them) printed two source lines before the one-line error that
+# names the signal and time, or during a run that recovered (a rejected try retried shorter).
+warnings.filterwarnings("ignore", r"(overflow|invalid value|divide by zero) encountered", RuntimeWarning, r"cosim\.")
 
 if TYPE_CHECKING:
     from cosim.api import run as run
