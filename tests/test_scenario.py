@@ -90,6 +90,11 @@ def test_good_scenario_loads_with_per_method_settings(tmp_path: Path) -> None:
         ('to = "b.u"', 'to = "b.u"\ndoc = 3', "couplings[1].doc", "must be a string"),
         ("params = { size = 2 }", "params = { size = 2 }\ndoc = 3", "subsims.a.doc", "must be a string"),
         ("stop = 1.0", "stop = 1.0\nname = 3", "name", "must be a string, got 3"),
+        # the name names the default results file: it wrote results/../../x-distributed.csv, outside results/
+        ("stop = 1.0", "stop = 1.0\nname = '../../x'", "name", "'../../x' names the default results file"),
+        ("stop = 1.0", "stop = 1.0\nname = 'a\\\\b'", "name", "without '/' or '\\'"),
+        ("stop = 1.0", "stop = 1.0\nname = ' '", "name", "names the default results file"),
+        ("stop = 1.0", "stop = 1.0\nname = '..'", "name", "names the default results file"),
         ("stop = 1.0", "stop = 1.0\ndescription = true", "description", "must be a string, got True"),
         ("stop = 1.0", "stop = 1.0\n[output]\npath = 3", "output.path", "must be a string, got 3"),
         ("interval = 0.1", "interval = true", "coupling", "interval must be a positive number, got True"),

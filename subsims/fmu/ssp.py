@@ -20,6 +20,7 @@ units that cannot be converted (not defined, or of different dimensions) where a
 from __future__ import annotations
 
 import io
+import re
 import tempfile
 import tomllib
 import xml.etree.ElementTree as ET
@@ -307,7 +308,9 @@ def read_ssp(path: str | Path) -> dict[str, Any]:
         system = _child(root, "System")
         if system is None:
             raise ScenarioError(f"{path}: SystemStructure.ssd has no System")
-        raw: dict[str, Any] = {"name": root.get("name") or path.stem, "subsims": {}, "couplings": []}
+        # (the name names the default results file: a tool's "Plant/Controller" must not make it a path)
+        name = re.sub(r"[/\\\0]", "_", root.get("name") or "").strip(" .") or path.stem
+        raw: dict[str, Any] = {"name": name, "subsims": {}, "couplings": []}
         experiment = _child(root, "DefaultExperiment")
         if experiment is not None:
             for attr, key in (("startTime", "start"), ("stopTime", "stop")):

@@ -222,6 +222,18 @@ def test_a_component_name_that_is_no_subsim_name_is_refused_before_anything_is_w
     assert not escaped.exists()
 
 
+@pytest.mark.parametrize(("system", "expected"), [("Plant/Controller", "Plant_Controller"), ("..", "system"),
+                                                  ("", "system"), ("a\\b", "a_b")])
+def test_a_system_name_that_is_a_path_still_names_a_results_file(tmp_path: Path, fmus: dict[str, Path], system: str,
+                                                                 expected: str) -> None:
+    """The system's name names the default results file, results/<name>-<method>.csv: a tool's "Plant/Controller"
+    became a path (or, now that a scenario's name is checked, an error the SSP's user cannot edit away)."""
+    text = oscillator_ssd().replace('name="oscillator-ssp"', f'name="{system}"')
+    ssp = write_ssp(tmp_path / "system.ssp", text, fmus["mass2"], {"resources/mass2.ssv": parameter_set({"m": 1.0})})
+    (tmp_path / "system.toml").write_text(COMPANION)
+    assert read_ssp(ssp)["name"] == expected
+
+
 def test_the_companions_start_reaches_every_fmu(tmp_path: Path, fmus: dict[str, Path]) -> None:
     """A companion ``start`` overrides DefaultExperiment's, for the FMUs too: each is initialized there
     (they were initialized at DefaultExperiment's start, and a strict FMU refused the first step)."""
