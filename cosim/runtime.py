@@ -317,6 +317,8 @@ class Runtime:
             raise CosimError("bad_value", str(exc)) from None
         if times.size < 2:
             raise CosimError("bad_value", f"t must hold at least 2 sample times, got {times.size}")
+        if times.flags.writeable:  # the caller's own array (in one process): advance() sees what it would remotely
+            times = _readonly(times)
         if times[0] != t0 or (t0 == 0.0 and math.copysign(1.0, times[0]) != math.copysign(1.0, t0)):  # -0.0 != 0.0
             start, what = float(times[0]), "the trial to commit ends" if commit else "the committed time is"
             raise CosimError("time_mismatch", f"interval starts at t={start!r} but {what} {t0!r}")
@@ -451,6 +453,8 @@ class Runtime:
         """``from_model``: a state ``advance()`` returned. Its faults are not the caller's but the model's:
         ``model_error``."""
         bad = "model_error" if from_model else "bad_value"
+        if getattr(state, "dtype", None) is not None and state.dtype.kind == "c":  # (a cast would drop the imaginary)
+            raise CosimError(bad, f"{what} is complex ({state.dtype}): a state is real numbers")
         try:
             s = np.asarray(state, dtype=np.float64)
         except (TypeError, ValueError):
@@ -504,14 +508,32 @@ class Runtime:
         known = ", ".join(f"{k}({p.size})" for k, p in self.inputs.items()) or "none"
         raise CosimError("bad_value", f"inputs: {'; '.join(p for p in parts if p)}; this subsim takes: {known}")
 
+    def _wrong_output_names(self, outputs: Mapping[str, Any]) -> None:
+        missing = [k for k in self.outputs if k not in outputs]
+        if len(missing) == 1:
+            raise CosimError("model_error", f"advance() did not return output {missing[0]!r}")
+        unknown = [k for k in outputs if k not in self.outputs]
+        said = "did not return output(s) " + repr(missing) if missing else f"returned undeclared output(s) {unknown}"
+        declared = ", ".join(f"{k}({p.size})" for k, p in self.outputs.items()) or "none"
+        raise CosimError("model_error", f"advance() {said}; this subsim declares: {declared}")
+
     def _check_outputs(self, outputs: Mapping[str, Any], times: np.ndarray) -> dict[str, np.ndarray]:
         if type(outputs) is not dict and not isinstance(outputs, Mapping):  # (the common case without the ABC check)
             raise CosimError("model_error", f"advance() must return a map of outputs, got {type(outputs).__name__}")
         checked = {}
+        if len(outputs) != len(self.outputs):
+            self._wrong_output_names(outputs)
         for name, port in self.outputs.items():
             if name not in outputs:
-                raise CosimError("model_error", f"advance() did not return output {name!r}")
-            v = np.asarray(outputs[name], dtype=np.float64)
+                self._wrong_output_names(outputs)
+            v = outputs[name]
+            if getattr(v, "dtype", None) is not None and v.dtype.kind == "c":  # (a cast would drop the imaginary)
+                raise CosimError("model_error", f"advance() output {name!r} is complex ({v.dtype}): outputs are real")
+            try:  # a copy: a model may hand back the same buffer every call, and a caller in this process keeps it
+                v = np.array(v, dtype=np.float64)
+            except (TypeError, ValueError) as exc:
+                raise CosimError("model_error", f"advance() output {name!r} is not an array of numbers "
+                                 f"({type(exc).__name__}: {exc})") from None
             if v.ndim == 1 and port.size == 1:
                 v = v.reshape(-1, 1)
             if v.shape != (times.size, port.size):

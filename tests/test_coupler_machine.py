@@ -204,3 +204,26 @@ def test_not_converged_says_what_to_try_from_how_the_residuals_went() -> None:
     for calm in ([1.1e-15, 2.2e-15, 1.1e-15, 3.3e-15, 2.2e-15, 4.4e-16, 1.1e-15, 2.3e-15],
                  [8.6, 5.0, 6.0, 3.0, 4.0, 2.0, 1.5, 0.91], [0.72, 0.0, 0.19]):  # (a Jacobi pair at 3 stages)
         assert "diverges" not in str(NotConverged(0.0, 1.0, 8, ["a.x"], {"a.x": calm}))
+
+
+@pytest.mark.parametrize(("answer", "words"), [
+    (lambda t: None, "must be {subsim: {output port: (n, width) array}}, got NoneType"),
+    (lambda t: {}, "has subsims []: send exactly those the Run asked for"),
+    (lambda t: {"y": {"y": np.zeros((t.size, 1))}, "z": {}}, "has subsims ['y', 'z']"),
+    (lambda t: {"y": {"v": np.zeros((t.size, 1))}}, "y has ['v'], its outputs are ['y']"),
+    (lambda t: {"y": np.zeros((t.size, 1))}, "y has ndarray, its outputs are ['y']"),
+    (lambda t: {"y": {"y": 1.0}}, f"y.y must be a float array of shape ({7}, 1), got float"),
+    (lambda t: {"y": {"y": np.zeros(t.size)}}, "y.y must be a float array of shape (7, 1), got shape (7,)"),
+    (lambda t: {"y": {"y": np.zeros((t.size, 7))}}, "y.y must be a float array of shape (7, 1), got shape (7, 7)"),
+])
+@pytest.mark.parametrize("method", ["centralized", "distributed"])
+def test_a_drivers_wrong_answer_to_a_run_is_named(method: str, answer, words: str) -> None:
+    """A driver of its own answering a Run wrongly got a KeyError, an IndexError or an AttributeError from inside
+    a coupling or the convergence check, and a wrong width of an output nothing reads was taken (a probe)."""
+    plan = Plan.build({"y": {"u": 1}}, {"y": {"y": 1}}, [Coupling.make("y.u", "y.y", "gain", {"k": -1.0})], method)
+    steps = Relaxation(plan, settings(method)).interval(0.0, 0.9)
+    action = steps.send(None)
+    assert isinstance(action, Run)
+    with pytest.raises(ValueError) as err:
+        steps.send(answer(action.times))
+    assert str(err.value).startswith("the answer sent to Run (subsims ['y'], 7 samples)") and words in str(err.value)

@@ -32,8 +32,9 @@ from __future__ import annotations
 
 import math
 from collections import Counter
-from collections.abc import Generator, Mapping, Sequence
+from collections.abc import Generator, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -306,6 +307,32 @@ def interval_end(t_start: float, t: float, H: float) -> float:
     return t_start + (k + 1) * H if t_start + k * H == t else t + H
 
 
+def _zip_ports(ports: Mapping[str, Any], widths: Mapping[str, int]) -> Iterator[tuple[Any, int]]:
+    if ports.keys() != widths.keys():
+        raise KeyError
+    return ((ports[p], w) for p, w in widths.items())
+
+
+def _misanswered(got: Any, asked: Mapping[str, Any], n: int, outputs: Mapping[str, Mapping[str, int]]) -> str:
+    """What is wrong with a driver's answer to a Run (see Relaxation._received)."""
+    head = f"the answer sent to Run (subsims {sorted(asked)}, {n} samples)"
+    if not isinstance(got, Mapping):
+        return f"{head} must be {{subsim: {{output port: (n, width) array}}}}, got {type(got).__name__}"
+    if got.keys() != asked.keys():
+        return f"{head} has subsims {sorted(got)}: send exactly those the Run asked for"
+    for name in asked:
+        ports, widths = got[name], outputs[name]
+        if not isinstance(ports, Mapping) or ports.keys() != widths.keys():
+            found = sorted(ports) if isinstance(ports, Mapping) else type(ports).__name__
+            return f"{head}: {name} has {found}, its outputs are {sorted(widths)}"
+        for port, w in widths.items():
+            v = ports[port]
+            if type(v) is not np.ndarray or v.shape != (n, w):
+                what = f"shape {v.shape}" if isinstance(v, np.ndarray) else type(v).__name__
+                return f"{head}: {name}.{port} must be a float array of shape ({n}, {w}), got {what}"
+    return head  # (not reached)
+
+
 class Relaxation:
     """The coupling algorithm for one plan and one set of settings (see the module docstring)."""
 
@@ -530,11 +557,23 @@ class Relaxation:
             else:
                 changed[name] = ins
         if changed:
-            got = yield self._action(stage, times, changed)
+            got = self._received((yield self._action(stage, times, changed)), changed, times.size)
             for name, ins in changed.items():
                 latest[name] = (ins, got[name])
                 outputs[name] = got[name]
         return outputs
+
+    def _received(self, got: Any, asked: Mapping[str, Any], n: int) -> Outputs:
+        """The driver's answer to a ``Run``: each subsim asked, every output port an (n, width) array. A driver's
+        mistake is named here (a KeyError or an IndexError deep in a coupling or the check said nothing)."""
+        try:
+            if got.keys() == asked.keys() and all(
+                    type(v) is np.ndarray and v.shape == (n, w)
+                    for name in asked for v, w in _zip_ports(got[name], self.plan.outputs[name])):
+                return got
+        except (AttributeError, KeyError, TypeError):
+            pass
+        raise ValueError(_misanswered(got, asked, n, self.plan.outputs))
 
     def _check(self, new: dict, old: dict, history: dict[str, list[float]]) -> Check:
         """The convergence check of one stage; appends each signal's largest residual to ``history``."""
