@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from cosim.contract import PROTOCOL_VERSION, CosimError, MalformedReply, SubsimError
-from cosim.runtime import DEFAULT_HISTORY, Runtime
+from cosim.runtime import DEFAULT_HISTORY, ModelFactory, Runtime
 from cosim.subsim import Param, Port, Subsim
 
 Pending = Callable[[], "IntervalResult"]
@@ -180,8 +180,13 @@ class SubsimHandle:
 class InProcessHandle(SubsimHandle):
     """Direct calls on a :class:`Runtime` in this process (runs eagerly; same results as remote)."""
 
-    def __init__(self, model: Subsim | Runtime, name: str | None = None, history_limit: int = DEFAULT_HISTORY):
-        self.runtime = model if isinstance(model, Runtime) else Runtime(model, name, history_limit)
+    def __init__(self, model: Subsim | ModelFactory | Runtime, name: str | None = None,
+                 history_limit: int = DEFAULT_HISTORY) -> None:
+        try:
+            self.runtime = model if isinstance(model, Runtime) else Runtime(model, name, history_limit)
+        except CosimError as exc:  # its model cannot be built: as a remote handle's spawn would say it
+            label = name or getattr(model, "name", None) or type(model).__name__
+            raise SubsimError(exc.code, exc.message, label, "start", exc.traceback) from None
         self.name = self.runtime.name
 
     def _begin(self, cmd: str, args: dict[str, Any]) -> Callable[[], dict]:

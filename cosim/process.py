@@ -25,7 +25,7 @@ from pathlib import Path
 import zenoh
 
 from cosim.console import prefixed_stream, say
-from cosim.contract import PROTOCOL_VERSION, VERSION
+from cosim.contract import PROTOCOL_VERSION, VERSION, CosimError
 from cosim.protocol.keys import check_name
 from cosim.protocol.security import SECRET_ENV, ZENOH_AUTH_ENV, ClientSecurity
 from cosim.protocol.transport.server import CommandServer
@@ -196,7 +196,11 @@ def main(model_cls: type[Subsim] | Subsim, argv: Sequence[str] | None = None, pr
     signal.signal(signal.SIGINT, _raise_stop)
     try:
         try:  # zenoh.open holds the signals until it returns (within --connect-timeout)
-            runtime = Runtime(model_cls, name=args.name, history_limit=args.history)
+            try:
+                runtime = Runtime(model_cls, name=args.name, history_limit=args.history)
+            except CosimError as exc:  # its model cannot be built: what the coordinator quotes as its last line
+                say(f"{args.name}: cannot start: {exc.message}")
+                return 1
             if not args.quiet_stop:  # started by hand (not launched by cosim run): its owner watches this terminal
                 runtime.on_model_error = lambda cmd, exc: say(
                     f"{args.name}: {cmd} failed: [{exc.code}] {exc.message}"

@@ -157,7 +157,10 @@ def open_session(
                 where = "started on another machine (launcher)" if spec.launcher else "external"
                 raise ScenarioError(f"{scenario.path}: [subsims.{name}] is {where}: it cannot run in this "
                                     "process (cosim run without --inprocess; cosim describe --launch)")
-            handles[name] = InProcessHandle(spec.model_class()(), name)
+            try:
+                handles[name] = InProcessHandle(spec.model_class(), name)
+            except SubsimError as exc:  # its model cannot be built
+                raise ScenarioError(f"{scenario.path}: [subsims.{name}] {exc.message}") from None
     else:
         away = {name: how for name, spec in scenario.subsims.items() if (how := elsewhere(spec)) is not None}
         if away and listen is None:

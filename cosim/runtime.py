@@ -202,7 +202,11 @@ class Runtime:
         self, model: Subsim | ModelFactory, name: str | None = None, history_limit: int = DEFAULT_HISTORY
     ) -> None:
         self._factory = as_factory(model)
-        model = self._new_model()
+        try:
+            model = self._new_model()
+        except Exception as exc:  # a model that cannot be built (a licence, a file, a bug): one line, its own frames
+            made_by = getattr(self._factory, "__name__", "") if not isinstance(model, Subsim) else ""
+            raise _model_exception(made_by if made_by.isidentifier() else "the model's constructor", exc) from None
         self.model = model
         self.name = name or model.name
         self.history_limit = history_limit

@@ -187,6 +187,25 @@ def test_a_broken_model_module_is_one_line_naming_its_file_and_line(tmp_path: Pa
         assert all(w in lines[0] for w in words), lines[0]
 
 
+def test_a_model_whose_constructor_raises_is_one_line_in_one_process_and_over_zenoh(tmp_path: Path) -> None:
+    """``__init__`` raising (a licence server, a missing file) printed 28 lines of cosim's traceback in one process
+    and from ``cosim describe``, and 20 from the subsim process before the line that said it (a probe)."""
+    (tmp_path / "licensed.py").write_text(
+        "from subsims.oscillator.subsim import Mass\n\nclass Licensed(Mass):\n    def __init__(self):\n"
+        "        raise ValueError('license server not found')\n")
+    sc = tmp_path / "s.toml"
+    sc.write_text(OSCILLATOR.read_text().replace('model = "subsims.oscillator.subsim:Mass"',
+                                                 'model = "licensed:Licensed"', 1))
+    said = "Licensed() raised ValueError: license server not found (licensed.py:5 in __init__)"
+    for command in (["run", str(sc), "--inprocess", "--quiet", "--output", str(tmp_path / "x.csv")],
+                    ["describe", str(sc)], ["run", str(sc), "--quiet", "--output", str(tmp_path / "y.csv")]):
+        done = subprocess.run([*COSIM, *command], capture_output=True, text=True, timeout=120, cwd=tmp_path)
+        assert done.returncode != 0 and "Traceback" not in done.stderr, done.stderr
+        assert done.stderr.strip().splitlines()[-1].endswith(said), done.stderr
+        if "--inprocess" in command or "describe" in command:
+            assert done.stderr.strip().splitlines() == [f"cosim: {sc}: [subsims.mass1] {said}"], done.stderr
+
+
 @pytest.mark.parametrize(("args", "words"), [
     (["--timeout", "0"], "--timeout must be a finite number of seconds > 0, got 0"),
     (["--timeout", "nan"], "--timeout must be a finite number of seconds > 0, got nan"),
