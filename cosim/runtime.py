@@ -10,6 +10,7 @@ import copy
 import hashlib
 import math
 import os
+import re
 import sysconfig
 import traceback
 from collections import deque
@@ -164,6 +165,18 @@ def _model_line(exc: BaseException) -> str:
     return ""
 
 
+def _naming(said: str, given: Mapping[str, Any]) -> str:
+    """A model's refusal of its parameters that names none of them ("could not convert string to float: 'x'"),
+    with the one whose value holds what it quotes, or else the names given."""
+    if not given or any(str(k) in said for k in given):
+        return said
+    quoted = re.findall(r"'([^']*)'", said)
+    hits = [k for k, v in given.items() if any(f"'{q}'" in repr(v) for q in quoted)]
+    if len(hits) == 1:
+        return f"{said} (parameter {hits[0]!r} = {given[hits[0]]!r})"
+    return f"{said} (parameters given: {', '.join(map(str, given))})"
+
+
 def _readonly(a: np.ndarray) -> np.ndarray:
     a = np.array(a, dtype=np.float64, copy=True)
     a.setflags(write=False)
@@ -293,13 +306,17 @@ class Runtime:
         except ModelError as exc:
             raise CosimError("model_error", f"configure: {exc}") from None
         except ValueError as exc:  # the model refusing a parameter, as the contract asks
-            raise CosimError("bad_value", f"configure: bad parameter: {exc}") from None
+            raise CosimError("bad_value", f"configure: bad parameter: {_naming(str(exc), params)}") from None
         except (KeyError, TypeError) as exc:  # a refusal too, or a bug (a KeyError 'K'): its frames tell which
-            raise CosimError("bad_value", f"configure: bad parameter (or a bug in initial_state()): "
-                                          f"{type(exc).__name__}: {exc}", _model_frames(exc)) from None
+            said = _naming(f"{type(exc).__name__}: {exc}", params)
+            raise CosimError("bad_value", f"configure: bad parameter (or a bug in initial_state()): {said}",
+                             _model_frames(exc)) from None
         except Exception as exc:
             raise _model_exception("initial_state", exc) from None
-        state = self._check_state(state, None, "initial_state() for these parameters gave a state that")
+        try:
+            state = self._check_state(state, None, "initial_state() for these parameters gave a state that")
+        except CosimError as exc:
+            raise CosimError(exc.code, _naming(exc.message, params)) from None
         self.model, self.inputs, self.outputs = model, inputs, outputs
         self._set_committed(t0, state)
         self.history.clear()

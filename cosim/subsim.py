@@ -99,6 +99,9 @@ def resolve_params(declared: Mapping[str, Param], given: Mapping[str, Any]) -> d
         number = isinstance(default, (int, float)) and not isinstance(default, bool)
         if number and isinstance(v, bool):  # True is 1 to Python: m = true would run as m = 1
             raise ValueError(f"parameter {k!r} must be a number (its default is {default!r}), got {v!r}")
+        if (number or isinstance(default, (list, tuple)) and _finite_numbers(default)) and not _finite_numbers(v):
+            # a table, or a list holding anything but numbers (a model may take a list where its default is one)
+            raise ValueError(f"parameter {k!r} must be a number or numbers (its default is {default!r}), got {v!r}")
         if number and isinstance(default, int) and isinstance(v, float) and not v.is_integer():  # int() truncates
             raise ValueError(f"parameter {k!r} must be a whole number (its default is {default!r}), got {v!r}")
     return {**{k: p.default for k, p in declared.items()}, **given}

@@ -6,6 +6,7 @@ refuses unknown variables itself, listing the settable ones.)"""
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable
 from typing import Any
 
@@ -179,3 +180,25 @@ def test_a_nan_parameter_is_refused_at_configure(cls: type[Subsim], name: str) -
         rt.configure({name: float("nan")})
     assert err.value.code == "bad_value" and name in err.value.message, err.value.message
     assert rt.state is None
+
+
+WRONG = [-6378.0, 0.0, 1e308, {"a": 1}, ["x"], "abc", [[1.0]], True]
+
+
+@pytest.mark.parametrize("cls", SHIPPED, ids=[c.__name__ for c in SHIPPED])
+def test_a_refused_parameter_is_named_whatever_the_model_said(cls: type[Subsim]) -> None:
+    """Values of the wrong kind or range, each parameter alone: a refusal names the parameter. It said "bad
+    parameter: math domain error" (orbit, altitude_km = -6378) or "could not convert string to float: 'a'"
+    (r0 = {a = 1}), naming nothing (a red-team probe); every shipped model had such messages."""
+    unnamed = []
+    for name in cls().params:
+        for value in WRONG:
+            rt = Runtime(cls)
+            try:
+                with np.errstate(all="ignore"), warnings.catch_warnings():
+                    warnings.simplefilter("ignore")
+                    rt.configure({name: value})
+            except CosimError as exc:
+                if name not in exc.message:
+                    unnamed.append(f"{name} = {value!r}: {exc.message}")
+    assert not unnamed, "\n".join(unnamed)

@@ -25,6 +25,9 @@ def circular_orbit(mu: float = C.GME, altitude_km: float = C.ALTITUDE_KM, rearth
     """Initial R, V of the paper's run (spec §7.8, orbit.f mode 2): circular, start at the northernmost point."""
     cvdr = math.pi / 180.0
     rmag = (rearth_km + altitude_km) * 1000.0
+    if not rmag > 0.0:  # (sqrt(mu / rmag) below: "math domain error" named nothing)
+        raise ValueError(f"the start orbit's radius rearth_km + altitude_km must be > 0 km, got {rearth_km!r} + "
+                         f"{altitude_km!r}")
     vmag = math.sqrt(mu / rmag)
     r = (rmag * math.cos(inclination_deg * cvdr), 0.0, rmag * math.sin(inclination_deg * cvdr))
     return r, (0.0, vmag, 0.0)

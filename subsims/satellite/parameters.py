@@ -10,7 +10,7 @@ def as_vec3(value: object, name: str) -> tuple[float, float, float]:
     """A parameter as 3 finite floats, or ValueError naming it."""
     try:
         v = tuple(float(x) for x in value)  # type: ignore[union-attr]
-    except TypeError:
+    except (TypeError, ValueError):  # (not iterable; or items that are no numbers, as a table's keys)
         raise ValueError(f"parameter {name!r} must be a sequence of 3 numbers, got {value!r}") from None
     if len(v) != 3 or not all(math.isfinite(x) for x in v):
         raise ValueError(f"parameter {name!r} must be 3 finite numbers, got {value!r}")
