@@ -243,13 +243,14 @@ class Bus:
 
     @classmethod
     def open(cls, listen: str = "tcp/127.0.0.1:0", run: str | None = None, security: Security | None = None,
-             names: Sequence[str] | None = None) -> Bus:
+             names: Sequence[str] | None = None, site_serves: Sequence[str] | None = None) -> Bus:
         """``listen``: a Zenoh endpoint, or :data:`PRIVATE`: a Unix socket in a fresh directory only this user can
         enter, for runs whose subsims are all started here (other users cannot even connect, let alone flood).
 
         ``names``: the subsims of the run. Each then logs in with its own login, which may serve only that
-        subsim's keys, so no subsim can read or answer another's requests (``--auth-file`` users may serve any
-        of them). Without names, every subsim shares the run's login and may serve any subsim key."""
+        subsim's keys, so no subsim can read or answer another's requests. ``site_serves``: the named subsims that
+        ``--auth-file`` users may serve too (and so read the requests of): the ones started by hand on their
+        sites (None: every one). Without names, every subsim shares the run's login and may serve any subsim key."""
         mismatch = zenoh_mismatch()
         if mismatch is not None:
             raise ValueError(mismatch)
@@ -265,7 +266,8 @@ class Bus:
             names = tuple(dict.fromkeys(check_name(n, "subsim name") for n in names))
             own = {name: zenoh_login(secret, run, name) for name in names}
             logins = {**site, **dict(own.values())}
-            servers = {name: [user, *site] for name, (user, _) in own.items()}
+            served = set(names if site_serves is None else site_serves)
+            servers = {name: [user, *(site if name in served else ())] for name, (user, _) in own.items()}
         private_dir = None
         if listen == PRIVATE:
             _sweep_private_dirs()

@@ -169,7 +169,8 @@ def open_session(
         try:
             security = security or scenario.security
             bus = Bus.open(listen or default_listen(scenario, security), run=run_id, security=security,
-                           names=list(scenario.subsims))
+                           names=list(scenario.subsims),  # a site's --auth-file login serves only what it starts:
+                           site_serves=[n for n, spec in scenario.subsims.items() if spec.external])
         except (ValueError, RuntimeError) as exc:  # bad --listen or security files; port taken
             raise ScenarioError(f"cannot open the bus: {exc}") from None
         bus.search_path = scenario.search_path  # its subsims import its modules, not another scenario's

@@ -26,7 +26,7 @@ from cosim.contract import SubsimError
 from cosim.launch import Bus
 from cosim.protocol.keys import alive_key, new_run_id, rpc_key
 from cosim.protocol.messages import decode_reply, encode_request, next_seq, open_reply, seal_request
-from cosim.protocol.security import ClientSecurity, zenoh_login
+from cosim.protocol.security import ClientSecurity, Security, zenoh_login
 from cosim.protocol.transport.session import client_config
 from cosim.runner import run_scenario
 from cosim.scenario import load
@@ -125,6 +125,37 @@ def test_a_subsims_own_login_cannot_read_serve_or_cover_for_another_subsim() -> 
         finally:
             spy.close()
     assert seen == [] and not alive
+
+
+def test_a_site_login_serves_only_the_subsims_started_by_hand(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """An ``--auth-file`` line is a site's login for the subsims it starts by hand. It may serve (and so read the
+    requests of) every subsim of the run: a red-team probe read orbit's, attitude's and aero's inputs with one.
+    ``cosim run`` now lets it serve only the external ones; here it sees none of a launched subsim's requests."""
+    users = tmp_path / "users"
+    users.write_text("site1:site-password\n")
+    with Bus.open(names=["launched", "remote"], security=Security(auth_file=users), site_serves=["remote"]) as bus:
+        proc = bus.spawn("subsims.integrator", "launched")
+        spy = open_client(bus, ("site1", "site-password"))
+        seen: list[str] = []
+        try:
+            for key in (rpc_key(bus.run, "launched"), f"cosim/{bus.run}/*/rpc", "cosim/**"):
+                spy.declare_queryable(key, lambda query: seen.append(str(query.key_expr)))
+            time.sleep(0.5)  # declarations propagate
+            for _ in range(10):
+                assert proc.handle.status()["name"] == "launched"
+        finally:
+            spy.close()
+    assert seen == []
+    opened: list = []  # and cosim run gives a site login the external subsims only: here none
+    real_open = Bus.open
+
+    def recording(*args: object, **kwargs: object) -> Bus:
+        opened.append(kwargs.get("site_serves"))
+        return real_open(*args, **kwargs)
+
+    monkeypatch.setattr(Bus, "open", recording)
+    run_scenario(load(OSCILLATOR), stop=0.05, output=tmp_path / "x.csv", progress=False, log=lambda m: None)
+    assert opened == [[]]
 
 
 def test_a_replayed_request_gets_no_answer(served: Bus) -> None:
