@@ -206,6 +206,37 @@ def test_not_converged_says_what_to_try_from_how_the_residuals_went() -> None:
         assert "diverges" not in str(NotConverged(0.0, 1.0, 8, ["a.x"], {"a.x": calm}))
 
 
+def test_a_residual_stuck_at_the_round_off_of_its_signal_is_told_to_raise_res() -> None:
+    """A heater fed a settling temperature (Q = Kp (T_set - T), Q near 19 W): its residual cycles at 4.5e-12, above
+    the default res = 1e-12, and the run stopped advising a shorter interval, which stalled at the same level
+    (a newcomer probe). Told so, with the res that passes; not when the stalled residual is far above round-off."""
+    from cosim.coupler.relaxation import NotConverged
+
+    level = [4.547e-12] * 6
+    said = str(NotConverged(290.0, 300.0, 100, ["node.Q"], {"node.Q": level}, {"node.Q": np.full((5, 1), 19.0)}))
+    assert said.splitlines()[-1] == (
+        "  to try: res = 1e-11 (the absolute tolerance, in [coupling] or per signal in [tolerances]): node.Q's "
+        "residual stopped falling at 4.55e-12, the round-off of values near 19 (a relative 2.4e-13), which no "
+        "interval or stage count removes")
+    assert "(last 6)" in said
+    for values in ({"node.Q": np.full((5, 1), 1e-3)}, None):  # 4.5e-9 relative: not round-off; values not known
+        said = str(NotConverged(290.0, 300.0, 100, ["node.Q"], {"node.Q": level}, values))
+        assert said.splitlines()[-1].startswith("  to try: a shorter [coupling] interval")
+    # and from the machine: the stuck signal's own values are what it judges by
+    plan = Plan.build({"y": {"u": 1}}, {"y": {"y": 1}}, [Coupling.make("y.u", "y.y", "gain", {"k": -1.0})],
+                      "distributed")
+    steps = Relaxation(plan, settings("distributed", max_stages=6, max_halvings=0,
+                                      tol=Tolerance(0.0, 1e-15))).interval(0.0, 0.9)
+    action, flip = steps.send(None), 0
+    with pytest.raises(NotConverged) as err:
+        while True:
+            if isinstance(action, Rollback):  # (the try is undone, then the error comes out)
+                steps.send(None)
+            flip ^= 1  # two answers a few ulps of 100 apart, by turns: a cycle in the last bits
+            action = steps.send({"y": {"y": np.full((action.times.size, 1), 100.0 + flip * 5.7e-14)}})
+    assert "to try: res = 1e-13" in str(err.value) and "values near 100" in str(err.value)
+
+
 @pytest.mark.parametrize(("answer", "words"), [
     (lambda t: None, "must be {subsim: {output port: (n, width) array}}, got NoneType"),
     (lambda t: {}, "has subsims []: send exactly those the Run asked for"),

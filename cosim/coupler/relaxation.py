@@ -183,14 +183,22 @@ class RunSummary:
 
 
 class NotConverged(RuntimeError):
-    def __init__(self, t0: float, t1: float, stages: int, failing: list[str], residuals: dict[str, list[float]]):
+    def __init__(self, t0: float, t1: float, stages: int, failing: list[str], residuals: dict[str, list[float]],
+                 values: Mapping[str, np.ndarray] | None = None):
+        """``values``: the failing signals' last samples, to tell a residual that is their round-off."""
         lines = [f"interval [{t0!r}, {t1!r}] did not converge in {stages} stages; failing signals:"]
         for name in failing:
             hist = ", ".join(f"{r:.3e}" for r in residuals[name][-8:])
-            lines.append(f"  {name}: residual by stage (last 8) [{hist}]")
+            lines.append(f"  {name}: residual by stage (last {min(8, len(residuals[name]))}) [{hist}]")
         shorter = "a shorter [coupling] interval (max_halvings > 0 halves it only where needed)"
         trends = {_trend(residuals[n]) for n in failing}
-        if "growing" in trends:
+        roundoff = _roundoff(failing, residuals, values) if trends == {"stalled"} else None
+        if roundoff is not None:  # a shorter interval would stall at the same level: the tolerances ask too much
+            (name, level, size), floor = roundoff, 10.0 ** math.ceil(math.log10(1.5 * roundoff[1]))
+            lines.append(f"  to try: res = {floor:.0e} (the absolute tolerance, in [coupling] or per signal in "
+                         f"[tolerances]): {name}'s residual stopped falling at {level:.2e}, the round-off of values "
+                         f"near {size:.3g} (a relative {level / size:.1e}), which no interval or stage count removes")
+        elif "growing" in trends:
             lines.append(f"  to try: {shorter}: the iteration diverges (the residuals grow), the coupling too strong "
                          "for an interval this long")
         elif "stalled" in trends:  # more stages will not help that signal
@@ -201,6 +209,26 @@ class NotConverged(RuntimeError):
             lines.append(f"  to try: more [coupling] max_stages, or {shorter}")
         super().__init__("\n".join(lines))
         self.t0, self.t1, self.stages, self.failing, self.residuals = t0, t1, stages, failing, residuals
+
+
+ROUNDOFF = 1e-9  # a stalled residual this small against its signal's values is taken for their round-off
+
+
+def _roundoff(failing: Sequence[str], residuals: Mapping[str, list[float]], values: Mapping[str, np.ndarray] | None
+              ) -> tuple[str, float, float] | None:
+    """(signal, its stalled residual, its largest |value|) with the largest residual, when every failing signal's
+    residual is within ``ROUNDOFF`` of its values' size (a cycle in the last bits, as a settling signal fed
+    through a gain makes); else None."""
+    if not values:
+        return None
+    found = []
+    for name in failing:
+        size, level = float(np.max(np.abs(values[name]), initial=0.0)), max(residuals[name][-4:])
+        if not 0.0 < level <= ROUNDOFF * size:
+            return None
+        found.append((level, name, size))
+    level, name, size = max(found)
+    return name, level, size
 
 
 def _trend(r: Sequence[float]) -> str:
@@ -602,7 +630,7 @@ class Relaxation:
                     raise NotConverged(float(times[0]), float(times[-1]), stage + 1, result.failing, history)
             last_stage = flat
             inputs = {k: c.evaluate(outputs, w, n) for k, c, w in self._all}
-        raise NotConverged(float(times[0]), float(times[-1]), s.max_stages, result.failing, history)
+        raise NotConverged(float(times[0]), float(times[-1]), s.max_stages, result.failing, history, last_stage)
 
     def _distributed(self, times: np.ndarray) -> Generator[Action, Outputs | None, Interval]:
         n, s, plan = times.size, self.settings, self.plan
@@ -649,5 +677,5 @@ class Relaxation:
                 if self._give_up_early and _diverging(history, result.failing):  # retried shorter: no use going on
                     raise NotConverged(float(times[0]), float(times[-1]), stage + 1, result.failing, history)
             fed_back = new
-        raise NotConverged(float(times[0]), float(times[-1]), s.max_stages, result.failing, history)
+        raise NotConverged(float(times[0]), float(times[-1]), s.max_stages, result.failing, history, fed_back)
 
