@@ -308,16 +308,17 @@ def _probe_times(grid: np.ndarray, rng: np.random.Generator) -> np.ndarray:
 @pytest.mark.parametrize("scheme", list(SCHEMES))
 @pytest.mark.parametrize("n", [1, 2, 3, 4, 5, 8])
 @pytest.mark.parametrize("uniform", [True, False])
-def test_an_array_of_times_gives_the_scalar_rows_bit_for_bit(scheme: str, n: int, uniform: bool) -> None:
+@pytest.mark.parametrize("m", [4, 20])  # (one time of up to 16 channels is interpolated on Python floats)
+def test_an_array_of_times_gives_the_scalar_rows_bit_for_bit(scheme: str, n: int, uniform: bool, m: int) -> None:
     rng = np.random.default_rng(1000 * n + uniform)
     grid = np.linspace(3.0, 3.4, n) if uniform else np.sort(rng.uniform(-2.0, 5.0, n))
-    values = rng.normal(size=(n, 4)) * np.array([1.0, 1e-8, 1e6, 7e3])
+    values = rng.normal(size=(n, m)) * np.resize([1.0, 1e-8, 1e6, 7e3], m)
     f = Segment(grid, values).interpolant(scheme)
     ts = _probe_times(grid, rng)
     with np.errstate(all="ignore"):  # n = 8 lagrange far outside the grid: large, still finite
         many = f(ts)
         one_by_one = np.array([f(float(t)) for t in ts])
-    assert many.shape == (ts.size, 4)
+    assert many.shape == (ts.size, m)
     assert many.tobytes() == one_by_one.tobytes()  # identical bits, signed zeros included
     for i, t in enumerate(grid):  # the samples themselves, as a batch of one and inside the batch
         assert f(np.array([t])).tobytes() == values[i : i + 1].tobytes()
