@@ -214,6 +214,11 @@ def test_a_model_whose_constructor_raises_is_one_line_in_one_process_and_over_ze
     (["--output", "out.txt"], "--output out.txt: a result file ends in .csv or .npz (lower case)"),
     (["--output", "out.NPZ"], "--output out.NPZ: a result file ends in .csv or .npz (lower case)"),
     (["--resume", "--overwrite"], "--resume goes on with the results; --overwrite starts them again: give one of them"),
+    # a model hanging in one process waited forever with --timeout 5 given (a newcomer probe)
+    (["--inprocess", "--timeout", "5"], "--timeout is for subsim processes: with --inprocess every model runs in this "
+                                        "one, which nothing times out or replaces (Ctrl-C stops it)"),
+    (["--inprocess", "--restarts", "1"], "--restarts is for subsim processes: with --inprocess every model runs in "
+                                         "this one, which nothing times out or replaces (Ctrl-C stops it)"),
     (["--resume", "--method", "unified"],
      "--resume continues coupled runs (centralized, distributed), not unified ones"),
 ])

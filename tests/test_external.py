@@ -194,8 +194,8 @@ def test_a_subsim_of_another_protocol_version_is_named_as_such_on_both_sides(cos
             handle.close()
         terminate(proc, 5.0)
     said = proc.stderr.read()
-    assert (f"m2: the coordinator speaks protocol {PROTOCOL_VERSION}, this subsim {PROTOCOL_VERSION + 1}: run the "
-            "same cosim version on both machines (cosim --version)") in said, said
+    assert (f"m2: refused a request in protocol {PROTOCOL_VERSION}, this subsim speaks {PROTOCOL_VERSION + 1}: if your "
+            "coordinator sent it, run the same cosim version on both machines (cosim --version)") in said, said
 
 
 def test_an_external_subsim_serving_another_model_is_refused_naming_both(tmp_path: Path, procs: list) -> None:

@@ -52,8 +52,9 @@ def answer(runtime: Runtime, payload: bytes | memoryview) -> bytes:
             cmd = request_command(payload)
         if isinstance(exc, VersionMismatch) and exc.version not in _told_versions:  # said here too, once: this
             _told_versions.add(exc.version)  # side's operator sees only "the coordinator left" otherwise
-            log.warning("%s: the coordinator speaks protocol %s, this subsim %s: run the same cosim version on both "
-                        "machines (cosim --version)", runtime.name, exc.version, PROTOCOL_VERSION)
+            log.warning("%s: refused a request in protocol %s, this subsim speaks %s: if your coordinator sent it, "
+                        "run the same cosim version on both machines (cosim --version); python -m cosim.conformance "
+                        "sends one on purpose", runtime.name, exc.version, PROTOCOL_VERSION)
         return encode_error(exc.code, exc.message, runtime.name, cmd, exc.traceback)
     except Exception as exc:  # last line of defence: the process must survive any request
         log.exception("unexpected failure serving %s", cmd)
