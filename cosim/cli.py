@@ -48,6 +48,10 @@ def _run(args: argparse.Namespace) -> int:
             if point is not None and kept is not None:  # (a results file removed meanwhile is not there to go on)
                 exc.add_note(f"every interval to t = {state['t']:.6g} s is in {kept}; once that is fixed, the same "
                              f"command {_with_resume(args)} goes on from t = {point:.6g} s")
+            elif kept is not None:  # no resume point yet: the same command alone would refuse the file it left
+                again = "the same command" if args.overwrite else "the same command with --overwrite"
+                exc.add_note(f"every interval to t = {state['t']:.6g} s is in {kept}; once that is fixed, {again} "
+                             "runs it again from the start")
         raise
     except interrupt.Interrupted as exc:
         stop, t = state.get("stop"), state["t"]

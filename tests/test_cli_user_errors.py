@@ -88,10 +88,14 @@ def test_a_transform_failing_in_a_run_stops_it_in_one_line_keeping_what_was_comm
         done = subprocess.run([*COSIM, "run", str(sc), *where, "--quiet", "--output", str(out), "--overwrite"],
                               capture_output=True, text=True, timeout=120, cwd=tmp_path)
         lines = done.stderr.strip().splitlines()  # --quiet: the subsims started do not announce themselves either
-        assert done.returncode == 1 and len(lines) == 1 and "Traceback" not in done.stderr, done.stderr
+        assert done.returncode == 1 and len(lines) == 2 and "Traceback" not in done.stderr, done.stderr
         assert lines[0].startswith("cosim: run stopped: coupling mass2.u -> mass1.F: transform 'picky:picky' "
                                    "failed: |x| = "), lines[0]
         assert lines[0].endswith("is past 0.6"), lines[0]
+        # where the intervals are, and (no resume point yet) how to run again: it said nothing (a newcomer probe)
+        end = float(out.read_text().splitlines()[-1].split(",")[0])
+        assert lines[1] == f"cosim: every interval to t = {end:.6g} s is in {out}; once that is fixed, the same " \
+                           "command runs it again from the start", lines[1]
         rows = out.read_text().splitlines()[1:]
         assert len(rows) > 5 and all(abs(float(r.split(",")[3])) <= 0.6 for r in rows)  # mass2.u
     # failing in the first interval: no file is left (headers only), so a second try needs no --overwrite
