@@ -111,7 +111,8 @@ class SubsimHandle:
         self, times: np.ndarray, inputs: Mapping[str, np.ndarray], interp: str = "linear", commit: bool = False
     ) -> Pending:
         """Send ``run_interval`` now, wait later. ``commit``: commit the latest trial first, in the same request."""
-        args = {"t": np.asarray(times), "inputs": dict(inputs), "interp": interp}
+        args = {"t": np.asarray(times), "interp": interp,
+                "inputs": {k: v if type(v) is np.ndarray else _as_array(v) for k, v in inputs.items()}}
         if commit:
             args["commit"] = True
         wait = self._begin("run_interval", args)
@@ -175,6 +176,15 @@ class SubsimHandle:
 
     def close(self) -> None:
         """Release coordinator-side resources (not the subsim)."""
+
+
+def _as_array(value: Any) -> Any:
+    """Samples given as nested lists (as a handle in this process takes them) as an array, to go on the wire; what
+    is no array of numbers goes as it is, for the subsim to refuse by name."""
+    try:
+        return np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        return value
 
 
 class InProcessHandle(SubsimHandle):

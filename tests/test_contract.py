@@ -268,3 +268,14 @@ def test_advance_in_one_process_gets_times_it_cannot_change_as_over_zenoh() -> N
         h.run_interval(t, ramp(t))
     assert err.value.code == "model_exception" and "read-only" in err.value.message
     assert t.tobytes() == TIMES.tobytes()
+
+
+def test_samples_given_as_lists_run_the_same_in_one_process_and_remotely(handle: SubsimHandle) -> None:
+    """A handle is the same object either way (docs/api.md): lists of samples ran in one process and were refused
+    remotely as "args.inputs.u: expected an array map" (a probe); what is no array of numbers is refused by name."""
+    as_lists = {"u": ramp(TIMES)["u"].tolist()}
+    got = handle.run_interval(TIMES.tolist(), as_lists).outputs["y"]
+    assert got.tobytes() == handle.run_interval(TIMES, ramp(TIMES)).outputs["y"].tobytes()
+    with pytest.raises(SubsimError) as err:
+        handle.run_interval(TIMES, {"u": [[1.0, 2.0]] * (N - 1) + [[1.0]]})
+    assert err.value.code in {"bad_value", "bad_request"} and "inputs.u" in err.value.message, err.value.message
