@@ -56,7 +56,19 @@ def import_object(path: str, what: str, search_path: Sequence[str] = ()) -> Any:
     try:
         return getattr(module, attr)
     except AttributeError as exc:
-        raise ValueError(f"{what} {path!r} not found ({exc})") from None
+        raise ValueError(f"{what} {path!r} not found ({exc}){_shadowed(module, search_path)}") from None
+
+
+def _shadowed(module: Any, search_path: Sequence[str]) -> str:
+    """A hint when the module imported is an installed or standard one while a file of that name sits in the
+    scenario's directories (``code.py`` beside the scenario: Python's own ``code`` was imported)."""
+    top = module.__name__.partition(".")[0]
+    found = [os.path.join(d, top + ".py") for d in search_path if os.path.isfile(os.path.join(d, top + ".py"))]
+    mine = getattr(module, "__file__", None)
+    if not found or (mine is not None and os.path.abspath(mine) in map(os.path.abspath, found)):
+        return ""
+    return (f": {top!r} is {mine or 'built into Python'}, which comes before {found[0]} (installed modules go first):"
+            f" rename {os.path.basename(found[0])}")
 
 
 def _home(spec: importlib.machinery.ModuleSpec | None) -> str | None:

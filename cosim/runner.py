@@ -162,6 +162,11 @@ def open_session(
             except SubsimError as exc:  # its model cannot be built
                 raise ScenarioError(f"{scenario.path}: [subsims.{name}] {exc.message}") from None
     else:
+        for name, spec in scenario.subsims.items():
+            if not spec.external and str(spec.model or "").startswith("__main__:"):  # its process exited, code 2
+                raise ScenarioError(f"{scenario.path}: [subsims.{name}.model] {spec.model!r} is a class of the "
+                                    "running script, which a subsim process cannot import: put it in a module "
+                                    "file beside the scenario, or run in this process (inprocess=True)")
         away = {name: how for name, spec in scenario.subsims.items() if (how := elsewhere(spec)) is not None}
         if away and listen is None:
             raise ScenarioError(f"{scenario.path}: [subsims.{next(iter(away))}] is started on another machine "

@@ -104,3 +104,36 @@ def test_two_scenarios_with_a_module_of_the_same_name_each_run_their_own(tmp_pat
     ends = [float(cosim.run(tmp_path / f"variant{rate}" / "s.toml", inprocess=inprocess)["ramp.y"][-1, 0])
             for rate in (1, 3, 1)]
     assert ends == [0.5, 1.5, 0.5]
+
+
+def test_a_model_file_named_as_a_standard_module_is_told_to_be_renamed(tmp_path: Path) -> None:
+    """``code.py`` beside the scenario: Python's own ``code`` is imported first (installed modules go first, by
+    design), and the error said only "module 'code' has no attribute 'Node'" (a newcomer probe)."""
+    from cosim.scenario import ScenarioError, load
+
+    (tmp_path / "code.py").write_text("from subsims.integrator.subsim import Integrator as Node\n")
+    (tmp_path / "s.toml").write_text('stop = 1.0\n[coupling]\ninterval = 0.5\nsamples = 3\n'
+                                     '[subsims.a]\nmodel = "code:Node"\ninputs = { u = 0.0 }\n')
+    with pytest.raises(ScenarioError) as err:
+        load(tmp_path / "s.toml")
+    said = str(err.value)
+    assert "module 'code' has no attribute 'Node'" in said and f"which comes before {tmp_path / 'code.py'}" in said
+    assert said.endswith("rename code.py"), said
+
+
+def test_a_model_class_of_the_running_script_is_refused_for_a_subsim_process(tmp_path: Path,
+                                                                               monkeypatch: pytest.MonkeyPatch) -> None:
+    """``model = "__main__:MyLag"`` (a class defined in the user's script) loads and runs in this process; over
+    Zenoh its process exited with code 2 saying only "module '__main__' has no attribute 'MyLag'" (a probe)."""
+    from cosim.runner import run_scenario
+    from cosim.scenario import ScenarioError, load
+    from subsims.integrator.subsim import Integrator
+
+    monkeypatch.setattr(sys.modules["__main__"], "MyLag", Integrator, raising=False)
+    (tmp_path / "s.toml").write_text('stop = 1.0\n[coupling]\ninterval = 0.5\nsamples = 3\n'
+                                     '[subsims.a]\nmodel = "__main__:MyLag"\ninputs = { u = 0.0 }\n')
+    scenario = load(tmp_path / "s.toml")
+    with pytest.raises(ScenarioError, match=r"\[subsims.a.model\] '__main__:MyLag' is a class of the running script"):
+        run_scenario(scenario, output=tmp_path / "z.csv", progress=False, log=lambda m: None)
+    done = run_scenario(scenario, output=tmp_path / "p.csv", inprocess=True, progress=False, log=lambda m: None)
+    assert done.summary.t_end == 1.0
