@@ -11,6 +11,7 @@ import socket
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
+from functools import partial
 from pathlib import Path
 from types import MappingProxyType
 
@@ -22,7 +23,7 @@ from cosim.coupler.plan import Plan
 from cosim.coupler.relaxation import Interval, RunSummary, Settings
 from cosim.driver import Coordinator, Deadline, Recovery, plan_for
 from cosim.handles import Description, InProcessHandle, SubsimHandle
-from cosim.launch import PRIVATE, UNSPECIFIED_HOSTS, Bus, Elsewhere, endpoint_for
+from cosim.launch import PRIVATE, UNSPECIFIED_HOSTS, Bus, Elsewhere, SubsimProcess, endpoint_for
 from cosim.outputs import OutputError, reserve_output, resume_path
 from cosim.progress import Progress
 from cosim.protocol.security import Security
@@ -140,8 +141,11 @@ def open_session(
     security: Security | None = None,
     run_id: str | None = None,
     announce: bool = True,
+    restarts: int = 0,
 ) -> Session:
     """Launch (or attach to) and configure every subsim. The caller must ``close()`` the session.
+    ``restarts``: how often a subsim process killed by a signal while it starts or is configured (a crash, the
+    OOM killer) is started again.
 
     ``security``: TLS and login files (else the scenario's ``[security]`` table, else loopback defaults).
     An external subsim is waited for up to ``external_wait`` seconds; for each, ``log`` gets one
@@ -195,11 +199,12 @@ def open_session(
             if external:
                 names = "subsim" + ("s " if len(external) > 1 else " ") + ", ".join(map(repr, external))
                 log(f"cosim: waiting up to {external_wait:g} s for external {names}")
+            left = {name: restarts for name in scenario.subsims}
             for name, spec in scenario.subsims.items():
                 if not spec.external:
-                    process = bus.spawn("", name, timeout=timeout, model=spec.model, lease=scenario.run.lease,
-                                        elsewhere=away.get(name))
-                    handles[name] = process.handle
+                    handles[name] = _started(name, left, log, lambda spec=spec, name=name: bus.spawn(
+                        "", name, timeout=timeout, model=spec.model, lease=scenario.run.lease,
+                        elsewhere=away.get(name)), lambda name=name: bus.respawn(name, timeout=timeout))
             waited_until = time.monotonic() + external_wait
             for name in external:  # one wait for all of them (a floor each: to attach one that is up already)
                 wait = max(waited_until - time.monotonic(), min(ATTACH_FLOOR, external_wait))
@@ -209,7 +214,15 @@ def open_session(
                                        "terminal says: a login or TLS this router refused is said there)")
         for name, spec in scenario.subsims.items():
             try:
-                session.descriptions[name] = handles[name].configure(spec.params, t0=scenario.start)
+                while True:
+                    try:
+                        session.descriptions[name] = handles[name].configure(spec.params, t0=scenario.start)
+                        break
+                    except SubsimError as exc:
+                        if bus is None or spec.external or not _may_start_again(exc, name, left, log):
+                            raise
+                    respawn = partial(bus.respawn, name, timeout=timeout)
+                    handles[name] = _started(name, left, log, respawn, respawn)  # (the session's own dict)
             except SubsimError as exc:
                 if exc.code not in PARAMS_REFUSED or isinstance(exc, MalformedReply):  # not about its parameters
                     raise
@@ -230,6 +243,30 @@ def open_session(
         session.close()
         raise
     return session
+
+
+def _may_start_again(exc: SubsimError, name: str, left: dict[str, int], log: Log) -> bool:
+    """Whether subsim ``name``'s process, which ``exc`` says was killed by a signal (a crash, the OOM killer; not an
+    exit of its own, which would come again), is to be started again; counts it against ``left``."""
+    if exc.code != "no_responder" or "killed by SIG" not in exc.message or left.get(name, 0) <= 0:
+        return False
+    left[name] -= 1
+    more = f"{left[name]} more time{'s' if left[name] != 1 else ''} at most"
+    log(f"cosim: {name} was lost while starting ({exc.message}); starting it again ({more})")
+    return True
+
+
+def _started(name: str, left: dict[str, int], log: Log, start: Callable[[], SubsimProcess],
+             again: Callable[[], SubsimProcess]) -> SubsimHandle:
+    """The handle of ``start()``'s process; ``again()`` (a respawn: a new key, so that the killed one's, if it
+    lingers, is deaf) while it is killed by a signal before it answers."""
+    while True:
+        try:
+            return start().handle
+        except SubsimError as exc:
+            if not _may_start_again(exc, name, left, log):
+                raise
+            start = again
 
 
 RESOLVED = 64  # a sample spacing must be at least this many units in the last place of the run's latest time
@@ -473,7 +510,8 @@ def run_scenario(
     try:
         saved = _resume_point(scenario, method, key, output, stop) if resume else None
         session = open_session(scenario, inprocess=inprocess, listen=listen, log=log, security=security,
-                               run_id=run_id, external_wait=attach_wait, announce=progress)
+                               run_id=run_id, external_wait=attach_wait, announce=progress,
+                               restarts=scenario.run.restarts if restarts is None else restarts)
     except BaseException:
         if lock is not None:
             lock.release()

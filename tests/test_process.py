@@ -277,7 +277,10 @@ def test_a_replaced_process_that_comes_back_stays_deaf(cosim_bus: Bus) -> None:
             assert new.handle.run_interval(t, {"u": np.ones((2, 1))}).end_time == 0.5
         assert new.handle.status()["pid"] not in (old, new.popen.pid)
     finally:
-        os.kill(old, signal.SIGKILL)
+        try:
+            os.kill(old, signal.SIGKILL)
+        except ProcessLookupError:  # it left by itself: stopped past its lease on a loaded machine, it found its
+            pass  # router gone when it ran again
 
 
 def test_a_tls_file_that_is_not_there_is_named_at_start(tmp_path: Path) -> None:

@@ -28,7 +28,10 @@ from cosim.coupler.relaxation import Interval, Settings
 from cosim.driver import Coordinator, Deadline, Recovery
 from cosim.launch import Bus
 from cosim.results import read_results
+from cosim.runner import run_scenario
+from cosim.scenario import load
 
+OSCILLATOR = Path(__file__).parents[1] / "scenarios" / "oscillator.toml"
 RING = [Coupling.make("a.u", "c.y", "gain", {"k": -0.8}), Coupling.make("b.u", "a.y"), Coupling.make("c.u", "b.y")]
 PARAMS = {"a": {"y0": [1.0]}, "b": {"y0": [0.5]}, "c": {"y0": [-0.25]}}
 H, INTERVALS = 0.1, 8
@@ -458,3 +461,53 @@ def test_an_external_subsim_that_is_not_started_again_is_named_so(tmp_path: Path
     assert "silent for longer than its 30 s lease" in err  # the lease its command was given, not 10 s
     assert ("run stopped: mass2.connect: [no_responder] it did not attach again within 2 s (its command is above; "
             "--attach-wait sets how long it is waited for)") in err, err
+
+
+CRASHES_ONCE = """
+import os, signal
+from pathlib import Path
+from subsims.oscillator.subsim import Mass
+
+MARK = Path(__file__).with_name("crashed-{where}")
+
+
+def crash_once():
+    if not MARK.exists():
+        MARK.touch()
+        os.kill(os.getpid(), signal.SIGKILL)  # as the OOM killer or a segfault would
+
+
+class Fragile(Mass):
+    def __init__(self):
+        if "{where}" == "start":
+            crash_once()
+        super().__init__()
+
+    def initial_state(self, params):
+        if "{where}" == "configure":
+            crash_once()
+        return super().initial_state(params)
+"""
+
+
+@pytest.mark.parametrize("where", ["start", "configure"])
+def test_a_subsim_killed_while_it_starts_is_started_again(tmp_path: Path, where: str) -> None:
+    """A launched subsim killed by a signal before it answered, or while it was configured, stopped the run at once
+    ("orbit.spawn: [no_responder] its process was killed by SIGKILL"), with restarts left (a red-team probe). It is
+    started again, within the run's restarts, and the run is the undisturbed one; an exit of its own is not retried
+    (it would come again), nor a kill with no restarts."""
+    (tmp_path / "fragile.py").write_text(CRASHES_ONCE.replace("{where}", where))
+    text = OSCILLATOR.read_text()
+    sc = tmp_path / "s.toml"
+    sc.write_text(text.replace('model = "subsims.oscillator.subsim:Mass"', 'model = "fragile:Fragile"', 1))
+    said: list[str] = []
+    run_scenario(load(OSCILLATOR), stop=0.2, output=tmp_path / "calm.csv", progress=False, log=said.append)
+    run_scenario(load(sc), stop=0.2, output=tmp_path / "x.csv", progress=False, log=said.append, restarts=2)
+    assert (tmp_path / f"crashed-{where}").exists()  # it did crash once
+    lost = [m for m in said if "lost while starting" in m]
+    assert len(lost) == 1 and lost[0].startswith("cosim: mass1 was lost while starting (") and "SIGKILL" in lost[0]
+    assert lost[0].endswith("; starting it again (1 more time at most)"), lost
+    assert (tmp_path / "x.csv").read_bytes() == (tmp_path / "calm.csv").read_bytes()
+    (tmp_path / f"crashed-{where}").unlink()
+    with pytest.raises(SubsimError, match="killed by SIGKILL"):
+        run_scenario(load(sc), stop=0.2, output=tmp_path / "y.csv", progress=False, log=said.append, restarts=0)
