@@ -91,7 +91,7 @@ def test_a_transform_failing_in_a_run_stops_it_in_one_line_keeping_what_was_comm
         assert done.returncode == 1 and len(lines) == 2 and "Traceback" not in done.stderr, done.stderr
         assert lines[0].startswith("cosim: run stopped: coupling mass2.u -> mass1.F: transform 'picky:picky' "
                                    "failed: |x| = "), lines[0]
-        assert lines[0].endswith("is past 0.6"), lines[0]
+        assert lines[0].endswith("is past 0.6 (ValueError at picky.py:6)"), lines[0]  # (where: a newcomer probe)
         # where the intervals are, and (no resume point yet) how to run again: it said nothing (a newcomer probe)
         end = float(out.read_text().splitlines()[-1].split(",")[0])
         assert lines[1] == f"cosim: every interval to t = {end:.6g} s is in {out}; once that is fixed, the same " \

@@ -72,3 +72,25 @@ def test_failing_transform_is_reported_naming_the_coupling() -> None:
         c.evaluate(_outputs(np.ones((5, 3))), 3, 5)
     with pytest.raises(ValueError, match="failed: could not convert"):
         Coupling.make("b.u", "a.y").evaluate(_outputs([["x"] * 3] * 5), 3, 5)
+
+
+def test_a_transform_may_give_one_wide_samples_flat_as_a_model_may() -> None:
+    """A model's (n,) output for a 1-wide port is taken; a transform's was refused, "(2,) ... takes (2, 1)" (a
+    newcomer probe). Wider targets still need (n, width)."""
+    flat = Coupling.make("b.u", "a.y", "subsims.satellite.transforms:torque_to_cm")
+    flat = Coupling(flat.target, flat.sources, lambda y: y[:, 0] * 2.0, {}, "halving")
+    got = flat.evaluate(_outputs(np.arange(15.0).reshape(5, 3)), 1, 5)
+    assert got.shape == (5, 1) and got[:, 0].tolist() == [0.0, 6.0, 12.0, 18.0, 24.0]
+    with pytest.raises(ValueError, match=r"gave shape \(5,\), need \(5, 3\)"):
+        flat.evaluate(_outputs(np.ones((5, 3))), 3, 5)
+
+
+def test_a_failing_transform_says_what_it_raised_and_where() -> None:
+    def boom(y: np.ndarray) -> np.ndarray:
+        raise ValueError("bad gain")
+
+    c = Coupling.make("b.u", "a.y")
+    c = Coupling(c.target, c.sources, boom, {}, "xf:boom")
+    with pytest.raises(ValueError, match=r"transform 'xf:boom' failed: bad gain \(ValueError at "
+                                         r"test_couplings_evaluate\.py:\d+\)$"):
+        c.evaluate(_outputs(np.ones((5, 3))), 3, 5)

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from pathlib import PurePath
+from traceback import extract_tb
 from typing import Any
 
 import numpy as np
@@ -65,7 +67,10 @@ class Coupling:
             if type(value) is not np.ndarray or value.dtype != _F8:
                 value = np.asarray(value, dtype=np.float64)
         except Exception as exc:
-            raise TransformError(f"coupling {self}: transform {self.transform_name!r} failed: {exc}") from exc
+            raise TransformError(f"coupling {self}: transform {self.transform_name!r} failed: {exc} "
+                                 f"({type(exc).__name__}{_raised_at(exc)})") from exc
+        if value.shape != (n, size) and value.shape == (n,) and size == 1:  # as a model's (n,) output is taken
+            value = value.reshape(n, 1)
         if value.shape != (n, size):
             name = self.transform_name
             raise TransformError(f"coupling {self}: transform {name!r} gave shape {value.shape}, need ({n}, {size})")
@@ -84,6 +89,12 @@ class Coupling:
 
 
 Ports = Mapping[str, Mapping[str, int]]  # subsim -> port -> width
+
+
+def _raised_at(exc: BaseException) -> str:
+    """`` at file.py:12``: where in a transform's own code ``exc`` came from (its innermost frame)."""
+    frames = extract_tb(exc.__traceback__)
+    return f" at {PurePath(frames[-1].filename).name}:{frames[-1].lineno}" if len(frames) > 1 else ""
 
 
 class TransformError(ValueError):
