@@ -12,6 +12,7 @@ command line: the result file is written only when ``output`` is given. See docs
 
 from __future__ import annotations
 
+import os
 import signal
 import tempfile
 from collections.abc import Callable, Mapping
@@ -60,7 +61,11 @@ class Result:
         if not bracket or not index.endswith("]") or not index[:-1].isdigit():
             raise KeyError(f"column {name!r}: name one as 'subsim.port[i]' (or 'time'); r[{name!r}] is the whole "
                            "signal")
-        return self[signal_name][:, int(index[:-1])]
+        signal, i = self[signal_name], int(index[:-1])
+        if i >= signal.shape[1]:  # (a bare numpy IndexError named no column)
+            raise KeyError(f"column {name!r}: {signal_name} has {signal.shape[1]} columns, [0] to "
+                           f"[{signal.shape[1] - 1}]")
+        return signal[:, i]
 
 
 class _Collect:
@@ -127,6 +132,9 @@ def run(
     A Ctrl-C (SIGINT) stops the run as the command's does, raising ``KeyboardInterrupt`` once every subsim is
     stopped and every result file finished; a second one does not cut that short.
     """
+    if not isinstance(scenario, (str, os.PathLike, Scenario)):  # (a dict met pathlib's TypeError)
+        raise ScenarioError(f"scenario must be a file path or a loaded Scenario, got {type(scenario).__name__}: "
+                            "write the tables to a .toml file, or build one with cosim.scenario.parse(tables, path)")
     sc = scenario if isinstance(scenario, Scenario) else load(scenario)
     if params is not None:
         sc = _with_params(sc, params)

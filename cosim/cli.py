@@ -147,7 +147,7 @@ def _run_until_done(args: argparse.Namespace, state: dict) -> int:
                               security=security, run_id=args.run_id, attach_wait=args.attach_wait,
                               resume=args.resume)
     s = report.summary
-    hist = ", ".join(f"{k} stages: {v}" for k, v in sorted(s.stages.items()))
+    hist = ", ".join(f"{v} took {k} stage{'s' if k != 1 else ''}" for k, v in sorted(s.stages.items()))
     resumed = f" from its resume point at t = {s.t_start:.6g}" if args.resume else ""
     lines = [f"{scenario.name} ({report.method}): {s.intervals} intervals{resumed} to t = {s.t_end:.6g} in "
              f"{s.wall_time:.2f} s{f' ({hist})' if hist else ''}"]
@@ -155,7 +155,7 @@ def _run_until_done(args: argparse.Namespace, state: dict) -> int:
         span = s.t_end - s.t_start
         per_second = f" ({s.round_trips / span:.3g} round trips per simulated second)" if span > 0 else ""
         took = "" if args.inprocess or s.round_trip_median is None else \
-            f"; a round trip took {1e3 * s.round_trip_median:.2g} ms (median), {_duration(s.round_trip_max)} at most"
+            f"; a round trip took {_duration(s.round_trip_median)} (median), {_duration(s.round_trip_max)} at most"
         lines.append(f"requests: {s.requests / s.intervals:.2f} an interval, sent in "
                      f"{s.round_trips / s.intervals:.2f} round trips{per_second}{took}")
     if s.rejected:  # tries rolled back and run again shorter: their cost is in the wall time, not the histogram
@@ -184,7 +184,12 @@ def _duration(seconds: float | None) -> str:
     """``0.52 ms``, ``9.1 s``: a round trip's time as an operator reads it."""
     if seconds is None:
         return "?"
-    return f"{1e3 * seconds:.2g} ms" if seconds < 1.0 else f"{seconds:.2g} s"
+    return f"{_figure(1e3 * seconds)} ms" if seconds < 1.0 else f"{_figure(seconds)} s"
+
+
+def _figure(x: float) -> str:
+    """Two significant digits, never in exponent form (230, not 2.3e+02: a newcomer probe)."""
+    return f"{x:.0f}" if abs(x) >= 100 else f"{x:.2g}"
 
 
 def _recover(args: argparse.Namespace) -> int:

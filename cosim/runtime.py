@@ -15,7 +15,7 @@ import sysconfig
 import traceback
 from collections import deque
 from collections.abc import Callable, Mapping
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, NoReturn
 
 import numpy as np
 
@@ -163,6 +163,14 @@ def _model_line(exc: BaseException) -> str:
         if frame.filename and not frame.filename.startswith(libraries) and not frame.filename.startswith("<"):
             return f" ({os.path.basename(frame.filename)}:{frame.lineno} in {frame.name})"
     return ""
+
+
+class _Inputs(dict):
+    """What a model's ``u(t)`` returns: a dict whose missing key names the inputs there are (a bare KeyError 'Temp'
+    did not)."""
+
+    def __missing__(self, key: object) -> NoReturn:
+        raise KeyError(f"{key!r} is no input of this subsim; its inputs: {', '.join(map(repr, self)) or 'none'}")
 
 
 def _naming(said: str, given: Mapping[str, Any]) -> str:
@@ -495,7 +503,7 @@ class Runtime:
         if inputs.keys() != self.inputs.keys():
             self._wrong_input_names(inputs)
         if not self.inputs:
-            return lambda t: {}
+            return lambda t: _Inputs()
         columns, slices, start = [], {}, 0
         for name, port in self.inputs.items():
             v = inputs[name]
@@ -518,9 +526,9 @@ class Runtime:
         at = interpolant(times, values, interp)  # times and values checked above
         if len(slices) == 1:
             (only,) = slices
-            return lambda t: {only: at(t)}
+            return lambda t: _Inputs({only: at(t)})
         items = tuple(slices.items())
-        return lambda t: (lambda x: {k: x[..., s] for k, s in items})(at(t))
+        return lambda t: (lambda x: _Inputs({k: x[..., s] for k, s in items}))(at(t))
 
     def _wrong_input_names(self, inputs: Mapping[str, Any]) -> None:
         missing = [k for k in self.inputs if k not in inputs]

@@ -214,7 +214,8 @@ class Scenario:
     def settings_for(self, method: str | None = None) -> Settings:
         method = method or self.default_method
         if method not in self.settings:
-            raise ScenarioError(f"{self.path}: method {method!r} unknown; use one of {', '.join(METHODS)}")
+            raise ScenarioError(f"{self.path}: method {method!r} unknown; use one of {', '.join(METHODS)}, or unified "
+                                "(the scenario's [unified] reference)")
         return self.settings[method]
 
 

@@ -188,3 +188,16 @@ def test_progress_is_drawn_in_a_notebook_and_not_in_a_log_file() -> None:
         bar.done()
     assert notebook.getvalue().startswith("\r 50.0%  t = 0.5 / 1 s") and "\x1b" not in notebook.getvalue()
     assert log.getvalue() == ""
+
+
+def test_api_mistakes_are_named(tmp_path: Path) -> None:
+    """A probe using cosim as a library: cosim.run(dict) met pathlib's TypeError, r.column('a.y[3]') a bare numpy
+    IndexError, and method='jacobi' listed the coupled methods without unified."""
+    with pytest.raises(ScenarioError, match="scenario must be a file path or a loaded Scenario, got dict"):
+        cosim.run({"stop": 1.0})
+    with pytest.raises(ScenarioError, match="method 'jacobi' unknown; use one of centralized, distributed, or unified"):
+        cosim.run(OSCILLATOR, method="jacobi", stop=0.1, inprocess=True)
+    r = cosim.run(OSCILLATOR, stop=0.1, inprocess=True)
+    with pytest.raises(KeyError, match=r"column 'mass1.u\[3\]': mass1.u has 1 columns, \[0\] to \[0\]"):
+        r.column("mass1.u[3]")
+    assert r.column("mass1.u[0]").tobytes() == r["mass1.u"][:, 0].tobytes()

@@ -99,7 +99,7 @@ def test_run_says_what_it_cost_in_requests(tmp_path: Path) -> None:
                            "--inprocess", "--method", "centralized", "--quiet"], capture_output=True, text=True,
                           timeout=120)
     assert done.returncode == 0, done.stderr
-    assert "10 intervals to t = 4 " in done.stdout and "(5 stages: 10)" in done.stdout
+    assert "10 intervals to t = 4 " in done.stdout and "(10 took 5 stages)" in done.stdout
     cost = "requests: 14.00 an interval, sent in 5.00 round trips (12.5 round trips per simulated second)"
     assert cost + "\n" in done.stdout  # in process: no round trip time (no transport to time)
     remote = subprocess.run([*COSIM, "run", str(ROOT / "scenarios" / "oscillator.toml"), "--stop", "0.5", "--output",

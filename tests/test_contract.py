@@ -279,3 +279,18 @@ def test_samples_given_as_lists_run_the_same_in_one_process_and_remotely(handle:
     with pytest.raises(SubsimError) as err:
         handle.run_interval(TIMES, {"u": [[1.0, 2.0]] * (N - 1) + [[1.0]]})
     assert err.value.code in {"bad_value", "bad_request"} and "inputs.u" in err.value.message, err.value.message
+
+
+def test_an_input_the_model_asks_for_by_a_wrong_name_is_named_with_the_inputs_there_are() -> None:
+    """``u(t)["Temp"]`` in advance(): a bare KeyError 'Temp' (a newcomer probe)."""
+    class Misnamed(Integrator):
+        def advance(self, state, times, u):
+            u(times[0])["Temp"]
+            return super().advance(state, times, u)
+
+    h = InProcessHandle(Misnamed(), name="misnamed")
+    h.configure({"size": 2})
+    with pytest.raises(SubsimError) as err:
+        h.run_interval(TIMES, ramp(TIMES))
+    assert err.value.code == "model_exception"
+    assert "KeyError: \"'Temp' is no input of this subsim; its inputs: 'u'\"" in err.value.message, err.value.message
