@@ -30,7 +30,9 @@ COSIM = [sys.executable, "-m", "cosim.cli"]
       "without quotes"]),
     # a transform's parameter misspelled, and gains that do not fit the signals: found before the run
     ('params = { k = 157.91367041742973 }\n\n[[couplings]]', 'params = { kk = 157.91367041742973 }\n\n[[couplings]]',
-     ["[couplings[0]]", "transform 'gain'", "unexpected keyword argument 'kk'"]),
+     ["[couplings[0]]", "transform 'gain'", "unexpected keyword argument 'kk' (did you mean 'k'?); it takes: k"]),
+    ('params = { k = 157.91367041742973 }\n\n[[couplings]]', 'params = { K = 157.91367041742973 }\n\n[[couplings]]',
+     ["[couplings[0]]", "unexpected keyword argument 'K' (did you mean 'k'?); it takes: k"]),  # (a newcomer probe)
     ('params = { k = 157.91367041742973 }\n\n[[couplings]]', 'params = { k = [[1.0], [2.0]] }\n\n[[couplings]]',
      ["[couplings[0]]", "mass2.u -> mass1.F: transform 'gain' turns 2 samples of mass2.u (1 wide) into shape (2, 2)",
       "input mass1.F takes 1 per sample"]),

@@ -8,7 +8,7 @@ import warnings
 import numpy as np
 import pytest
 
-from cosim.coupler.couplings import Coupling
+from cosim.coupler.couplings import Coupling, check_couplings
 
 
 def _outputs(y: object) -> dict:
@@ -79,8 +79,11 @@ def test_a_transform_may_give_one_wide_samples_flat_as_a_model_may() -> None:
     newcomer probe). Wider targets still need (n, width)."""
     flat = Coupling.make("b.u", "a.y", "subsims.satellite.transforms:torque_to_cm")
     flat = Coupling(flat.target, flat.sources, lambda y: y[:, 0] * 2.0, {}, "halving")
+    check_couplings([flat], {"b": {"u": 1}}, {"a": {"y": 3}})  # its trial before the run refused it first
     got = flat.evaluate(_outputs(np.arange(15.0).reshape(5, 3)), 1, 5)
     assert got.shape == (5, 1) and got[:, 0].tolist() == [0.0, 6.0, 12.0, 18.0, 24.0]
+    with pytest.raises(ValueError, match=r"into shape \(2,\); input b.u takes 3 per sample"):
+        check_couplings([flat], {"b": {"u": 3}}, {"a": {"y": 3}})
     with pytest.raises(ValueError, match=r"gave shape \(5,\), need \(5, 3\)"):
         flat.evaluate(_outputs(np.ones((5, 3))), 3, 5)
 

@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from difflib import get_close_matches
+from inspect import signature
 from pathlib import PurePath
 from traceback import extract_tb
 from typing import Any
@@ -187,13 +190,28 @@ def _try_transform(c: Coupling, inputs: Ports, outputs: Ports) -> None:
         value = c.transform(*args, **c.params)
     except Exception as exc:
         if isinstance(exc, TypeError) or c.transform in BUILTIN.values():
-            raise ValueError(f"coupling {c}: transform {c.transform_name!r}: {exc}") from None
+            raise ValueError(f"coupling {c}: transform {c.transform_name!r}: {exc}{_takes(c, exc)}") from None
         return
     shape = np.shape(value)
-    if shape != (2, size):
+    if shape != (2, size) and not (shape == (2,) and size == 1):  # (flat samples of a 1-wide input: evaluate takes)
         widths = ", ".join(f"{s} ({outputs[s.subsim][s.port]} wide)" for s in c.sources)
         raise ValueError(f"coupling {c}: transform {c.transform_name!r} turns 2 samples of {widths} into shape "
                          f"{shape}; input {c.target} takes {size} per sample: (2, {size})")
+
+
+def _takes(c: Coupling, exc: BaseException) -> str:
+    """For a parameter the transform does not take: the one it takes that is close, and what it takes."""
+    unknown = re.search(r"unexpected keyword argument '([^']+)'", str(exc))
+    try:
+        names = [p.name for p in signature(c.transform).parameters.values() if p.kind is p.KEYWORD_ONLY
+                 or (p.kind is p.POSITIONAL_OR_KEYWORD and p.default is not p.empty)]
+    except (TypeError, ValueError):  # no signature to read (a builtin)
+        return ""
+    if unknown is None or not names:
+        return ""
+    close = get_close_matches(unknown.group(1), names, n=1) or [n for n in names if n.lower() == unknown.group(1)
+                                                                 .lower()]
+    return (f" (did you mean {close[0]!r}?)" if close else "") + f"; it takes: {', '.join(names)}"
 
 
 def feedback_weight(order: Sequence[str], couplings: Sequence[Coupling], sizes: Mapping[SignalRef, int]) -> int:
