@@ -331,7 +331,8 @@ def test_a_model_that_fails_to_start_is_named_with_the_last_line_its_process_wro
     with pytest.raises(SubsimError) as err:
         spawn_subsim("bad_init:Bad", name="bad")
     assert str(err.value) == ("bad.spawn: [no_responder] its process exited with code 1; the last line it wrote: "
-                              "RuntimeError: calibration file /data/cal.csv not found")
+                              "bad: cannot start: Bad() raised RuntimeError: calibration file /data/cal.csv not found "
+                              "(bad_init.py:8 in __init__)")  # (its one line, not a traceback's last: newcomer probe)
 
 
 def test_a_subsim_that_timed_out_is_killed_at_once_when_stopped(cosim_bus: Bus) -> None:
