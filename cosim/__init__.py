@@ -11,7 +11,9 @@ from cosim.contract import VERSION as __version__  # noqa: F401  (the contract i
 # NumPy's floating-point warnings from cosim's own arithmetic on coupled values (interpolating the inputs of a
 # diverging iteration, transforming them, checking them) printed two source lines before the one-line error that
 # names the signal and time, or during a run that recovered (a rejected try retried shorter).
-warnings.filterwarnings("ignore", r"(overflow|invalid value|divide by zero) encountered", RuntimeWarning, r"cosim\.")
+# (appended: a user's -W error::RuntimeWarning, installed before it, still wins)
+warnings.filterwarnings("ignore", r"(overflow|invalid value|divide by zero) encountered", RuntimeWarning, r"cosim\.",
+                        append=True)
 
 if TYPE_CHECKING:
     from cosim.api import run as run

@@ -189,7 +189,8 @@ def _duration(seconds: float | None) -> str:
 
 def _figure(x: float) -> str:
     """Two significant digits, never in exponent form (230, not 2.3e+02: a newcomer probe)."""
-    return f"{x:.0f}" if abs(x) >= 100 else f"{x:.2g}"
+    shown = f"{x:.2g}"
+    return f"{x:.0f}" if "e" in shown else shown  # (99.7 rounds to 1e+02 too)
 
 
 def _recover(args: argparse.Namespace) -> int:

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from cosim.contract import PROTOCOL_VERSION, CosimError, MalformedReply, SubsimError
-from cosim.runtime import DEFAULT_HISTORY, ModelFactory, Runtime
+from cosim.runtime import DEFAULT_HISTORY, ModelFactory, Runtime, maker_name
 from cosim.subsim import Param, Port, Subsim
 
 Pending = Callable[[], "IntervalResult"]
@@ -112,13 +112,23 @@ class SubsimHandle:
     ) -> Pending:
         """Send ``run_interval`` now, wait later. ``commit``: commit the latest trial first, in the same request."""
         args = {"t": np.asarray(times), "interp": interp,
-                "inputs": {k: v if type(v) is np.ndarray else _as_array(v) for k, v in inputs.items()}}
+                "inputs": {k: v if type(v) is np.ndarray else self._as_array(k, v) for k, v in inputs.items()}}
         if commit:
             args["commit"] = True
         wait = self._begin("run_interval", args)
         if self.checks_replies and self.outputs is not None:
             return lambda: self._checked(wait(), args["t"])
         return lambda: _interval_result(wait())
+
+    def _as_array(self, port: str, value: Any) -> np.ndarray:
+        """Samples given as nested lists (as a handle in this process takes them) as an array, to go on the wire;
+        what is no array of real numbers is refused as in this process (not as a wire format or codec error)."""
+        try:
+            if np.iscomplexobj(value):
+                raise TypeError("complex")
+            return np.asarray(value, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise SubsimError("bad_value", f"inputs.{port}: not a float array", self.name, "run_interval") from None
 
     def _checked(self, r: dict, times: np.ndarray) -> IntervalResult:
         """A run_interval reply that holds what the description and the request say it must, or a one-line error
@@ -178,15 +188,6 @@ class SubsimHandle:
         """Release coordinator-side resources (not the subsim)."""
 
 
-def _as_array(value: Any) -> Any:
-    """Samples given as nested lists (as a handle in this process takes them) as an array, to go on the wire; what
-    is no array of numbers goes as it is, for the subsim to refuse by name."""
-    try:
-        return np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError):
-        return value
-
-
 class InProcessHandle(SubsimHandle):
     """Direct calls on a :class:`Runtime` in this process (runs eagerly; same results as remote)."""
 
@@ -195,7 +196,7 @@ class InProcessHandle(SubsimHandle):
         try:
             self.runtime = model if isinstance(model, Runtime) else Runtime(model, name, history_limit)
         except CosimError as exc:  # its model cannot be built: as a remote handle's spawn would say it
-            label = name or getattr(model, "name", None) or type(model).__name__
+            label = name or (type(model).__name__ if isinstance(model, Subsim) else maker_name(model) or "model")
             raise SubsimError(exc.code, exc.message, label, "start", exc.traceback) from None
         self.name = self.runtime.name
 

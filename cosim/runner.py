@@ -83,6 +83,7 @@ class Session:
     timeout: float = 120.0
     log: Log = say
     listen: str | None = None  # the router endpoint asked for (--listen): what external subsims are told
+    restarts_left: int = 0  # the run's restarts not used by subsims lost while they started
 
     def revive(self, name: str) -> SubsimHandle:
         """A new process for a subsim that died or hung, configured as at the run's start: a launched one is
@@ -190,7 +191,8 @@ def open_session(
             except ValueError as exc:
                 bus.close()
                 raise ScenarioError(f"{scenario.path}: [subsims.{name}] {exc}") from None
-    session = Session(scenario, handles, {}, bus, external_wait=external_wait, timeout=timeout, log=log, listen=listen)
+    session = Session(scenario, handles, {}, bus, external_wait=external_wait, timeout=timeout, log=log, listen=listen,
+                      restarts_left=restarts)
     try:
         if bus is not None:
             external = [name for name, spec in scenario.subsims.items() if spec.external]
@@ -199,10 +201,9 @@ def open_session(
             if external:
                 names = "subsim" + ("s " if len(external) > 1 else " ") + ", ".join(map(repr, external))
                 log(f"cosim: waiting up to {external_wait:g} s for external {names}")
-            left = {name: restarts for name in scenario.subsims}
             for name, spec in scenario.subsims.items():
                 if not spec.external:
-                    handles[name] = _started(name, left, log, lambda spec=spec, name=name: bus.spawn(
+                    handles[name] = _started(session, name, lambda spec=spec, name=name: bus.spawn(
                         "", name, timeout=timeout, model=spec.model, lease=scenario.run.lease,
                         elsewhere=away.get(name)), lambda name=name: bus.respawn(name, timeout=timeout))
             waited_until = time.monotonic() + external_wait
@@ -219,10 +220,10 @@ def open_session(
                         session.descriptions[name] = handles[name].configure(spec.params, t0=scenario.start)
                         break
                     except SubsimError as exc:
-                        if bus is None or spec.external or not _may_start_again(exc, name, left, log):
+                        if bus is None or spec.external or not _may_start_again(session, exc, name):
                             raise
                     respawn = partial(bus.respawn, name, timeout=timeout)
-                    handles[name] = _started(name, left, log, respawn, respawn)  # (the session's own dict)
+                    handles[name] = _started(session, name, respawn, respawn)  # (the session's own dict)
             except SubsimError as exc:
                 if exc.code not in PARAMS_REFUSED or isinstance(exc, MalformedReply):  # not about its parameters
                     raise
@@ -245,18 +246,20 @@ def open_session(
     return session
 
 
-def _may_start_again(exc: SubsimError, name: str, left: dict[str, int], log: Log) -> bool:
-    """Whether subsim ``name``'s process, which ``exc`` says was killed by a signal (a crash, the OOM killer; not an
-    exit of its own, which would come again), is to be started again; counts it against ``left``."""
-    if exc.code != "no_responder" or "killed by SIG" not in exc.message or left.get(name, 0) <= 0:
+def _may_start_again(session: Session, exc: SubsimError, name: str) -> bool:
+    """Whether subsim ``name``'s process, started on this machine, which ``exc`` says was killed by a signal (a
+    crash, the OOM killer; not an exit of its own, which would come again), is to be started again: it counts as
+    one of the run's restarts (``session.restarts_left``)."""
+    if (exc.code != "no_responder" or "killed by SIG" not in exc.message or session.restarts_left <= 0
+            or session.scenario.subsims[name].launcher):  # (over ssh a kill reads as an exit code)
         return False
-    left[name] -= 1
-    more = f"{left[name]} more time{'s' if left[name] != 1 else ''} at most"
-    log(f"cosim: {name} was lost while starting ({exc.message}); starting it again ({more})")
+    session.restarts_left -= 1
+    more = f"{session.restarts_left} more restart{'s' if session.restarts_left != 1 else ''} in this run at most"
+    session.log(f"cosim: {name} was lost while starting ({exc.message}); starting it again ({more})")
     return True
 
 
-def _started(name: str, left: dict[str, int], log: Log, start: Callable[[], SubsimProcess],
+def _started(session: Session, name: str, start: Callable[[], SubsimProcess],
              again: Callable[[], SubsimProcess]) -> SubsimHandle:
     """The handle of ``start()``'s process; ``again()`` (a respawn: a new key, so that the killed one's, if it
     lingers, is deaf) while it is killed by a signal before it answers."""
@@ -264,7 +267,7 @@ def _started(name: str, left: dict[str, int], log: Log, start: Callable[[], Subs
         try:
             return start().handle
         except SubsimError as exc:
-            if not _may_start_again(exc, name, left, log):
+            if not _may_start_again(session, exc, name):
                 raise
             start = again
 
@@ -469,7 +472,16 @@ def default_listen(scenario: Scenario, security: Security | None) -> str:
 
 
 def default_output(scenario: Scenario, method: str) -> Path:
-    return scenario.output_path or Path.cwd() / "results" / f"{scenario.name}-{method}.csv"
+    """``[output] path``, else results/<name>-<method>.csv: ScenarioError when the name would make that a path
+    (name = '../../x' wrote results/../../x-distributed.csv, outside results/)."""
+    if scenario.output_path is not None:
+        return scenario.output_path
+    name = scenario.name
+    if not name.strip() or name in (".", "..") or any(c in name for c in "/\\\0"):
+        raise ScenarioError(f"{scenario.path}: [name] {name!r} names the default results file results/<name>-"
+                            f"<method>.csv: a name without '/' or '\\', or a file of its own ([output] path or "
+                            "--output)")
+    return Path.cwd() / "results" / f"{name}-{method}.csv"
 
 
 def run_scenario(
@@ -527,7 +539,7 @@ def run_scenario(
                     log(f"cosim: {path} is not the file the run had when its resume point at t = {saved.point.t:g} "
                         "was saved: the results before that point came from the earlier one")
         spec = scenario.run
-        restarts = spec.restarts if restarts is None else restarts
+        restarts = session.restarts_left  # (those a subsim lost while it started used are gone)
         recovery = None
         if restarts and not inprocess:
             recovery = Recovery(session.revive, restarts, spec.checkpoint_every, log)

@@ -45,7 +45,8 @@ def _model_exception(where: str, exc: BaseException) -> CosimError:
     hint = ""
     if isinstance(exc, ValueError) and "read-only" in str(exc):  # numpy's words for a write into the state given
         hint = ": the state and inputs advance() is given are read-only; change a copy (x = state.copy())"
-    return CosimError("model_exception", f"{where}() raised {type(exc).__name__}: {exc}{line}{hint}",
+    call = where if " " in where else f"{where}()"  # (a description, not a name to call)
+    return CosimError("model_exception", f"{call} raised {type(exc).__name__}: {exc}{line}{hint}",
                       _model_frames(exc))
 
 
@@ -155,9 +156,18 @@ def _same(a: Any, b: Any) -> bool:
         return False
 
 
+def maker_name(factory: Any) -> str:
+    """What makes a model, as a call names it: ``Boom`` for the class or ``partial(Boom, 2)``, else what it is."""
+    made = getattr(factory, "func", factory)  # (functools.partial)
+    name = getattr(made, "__name__", "")
+    return name if name.isidentifier() else ""
+
+
 def _model_line(exc: BaseException) -> str:
-    """`` (file.py:12 in helper)``: the innermost frame outside installed packages and the standard library."""
-    libraries = tuple(p for p in {sysconfig.get_paths()[k] for k in ("stdlib", "purelib", "platlib")} if p)
+    """`` (file.py:12 in helper)``: the innermost frame outside installed packages, the standard library and cosim
+    (an editable install is none of the first two)."""
+    libraries = tuple(p for p in {sysconfig.get_paths()[k] for k in ("stdlib", "purelib", "platlib")} if p) + (
+        os.path.dirname(os.path.abspath(__file__)) + os.sep,)
     own = exc.__traceback__.tb_next if exc.__traceback__ is not None else None  # the runtime's frame left out
     for frame in reversed(traceback.extract_tb(own)):
         if frame.filename and not frame.filename.startswith(libraries) and not frame.filename.startswith("<"):
@@ -226,8 +236,11 @@ class Runtime:
         try:
             model = self._new_model()
         except Exception as exc:  # a model that cannot be built (a licence, a file, a bug): one line, its own frames
-            made_by = getattr(self._factory, "__name__", "") if not isinstance(model, Subsim) else ""
-            raise _model_exception(made_by if made_by.isidentifier() else "the model's constructor", exc) from None
+            if isinstance(model, Subsim):  # a prototype, copied for each configure
+                raise CosimError("model_exception", f"copying the {type(model).__name__} instance given (each "
+                                 f"configure works on a copy) raised {type(exc).__name__}: {exc}{_model_line(exc)}",
+                                 _model_frames(exc)) from None
+            raise _model_exception(maker_name(model) or "the model factory", exc) from None
         self.model = model
         self.name = name or model.name
         self.history_limit = history_limit
@@ -482,7 +495,7 @@ class Runtime:
         """``from_model``: a state ``advance()`` returned. Its faults are not the caller's but the model's:
         ``model_error``."""
         bad = "model_error" if from_model else "bad_value"
-        if getattr(state, "dtype", None) is not None and state.dtype.kind == "c":  # (a cast would drop the imaginary)
+        if getattr(getattr(state, "dtype", None), "kind", None) == "c":  # (a cast would drop the imaginary part)
             raise CosimError(bad, f"{what} is complex ({state.dtype}): a state is real numbers")
         try:
             s = np.asarray(state, dtype=np.float64)
@@ -556,7 +569,7 @@ class Runtime:
             if name not in outputs:
                 self._wrong_output_names(outputs)
             v = outputs[name]
-            if getattr(v, "dtype", None) is not None and v.dtype.kind == "c":  # (a cast would drop the imaginary)
+            if getattr(getattr(v, "dtype", None), "kind", None) == "c":  # (a cast would drop the imaginary part)
                 raise CosimError("model_error", f"advance() output {name!r} is complex ({v.dtype}): outputs are real")
             try:  # a copy: a model may hand back the same buffer every call, and a caller in this process keeps it
                 v = np.array(v, dtype=np.float64)

@@ -272,7 +272,7 @@ def parse(raw: Mapping[str, Any], path: Path) -> Scenario:
     couplings = tuple(p.coupling(i, c, subsims) for i, c in enumerate(p.list_of_tables(raw, "couplings")))
     settings, default_method = p.settings(p.table(raw, "coupling"), p.tolerances(p.table(raw, "tolerances")), subsims)
     out_path, signals = p.output(p.table(raw, "output"))
-    return Scenario(path, p.name(raw), p.string(raw, "description", ""), start, stop,
+    return Scenario(path, p.string(raw, "name", path.stem), p.string(raw, "description", ""), start, stop,
                     MappingProxyType(subsims), couplings, MappingProxyType(settings), default_method, out_path,
                     signals, p.unified(p.table(raw, "unified")), p.run(p.table(raw, "run")),
                     p.security(p.table(raw, "security")),
@@ -318,14 +318,6 @@ class _Parser:
         if not isinstance(v, str):
             raise self.fail(f"{where}.{key}" if where else key, f"must be a string, got {v!r}")
         return v
-
-    def name(self, raw: Mapping) -> str:
-        """The scenario's name: a file name's part (it names the default results file), never a path."""
-        name = self.string(raw, "name", self.path.stem)
-        if not name.strip() or name in (".", "..") or any(c in name for c in "/\\\0"):
-            raise self.fail("name", f"{name!r} names the default results file results/<name>-<method>.csv: a name "
-                            "without '/' or '\\' (to write elsewhere, set [output] path or --output)")
-        return name
 
     def table(self, raw: Mapping, key: str, where: str | None = None) -> Mapping[str, Any]:
         value = raw.get(key, {})

@@ -243,6 +243,9 @@ def _barycentric_at(t: float, x: list[float], w: list[float], rows: list[list[fl
     for cj, row in zip(c[2:], rows[2:]):
         num = [n + cj * v for n, v in zip(num, row)]
         den = den + cj
+    if den == 0.0:  # (far outside the grid) NumPy's inf or nan, as the array forms give, not ZeroDivisionError
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.array(num) / den
     return np.array([n / den for n in num])
 
 
@@ -308,19 +311,21 @@ def _cubic(times: np.ndarray, values: np.ndarray) -> Interpolant:
         return _apply(_weights("cubic", times, ts, _cubic_weights), values)
 
     inner = times[2:-2].tolist()
-    pieces: list = []  # (nodes, their times, their weights) of each piece, made at the first call for one time
+    pieces: list = []  # per piece: its times, their weights, the rows of its samples (None: many channels), nodes
+    few = values.shape[1] <= FEW_CHANNELS
 
     def at(t: float) -> np.ndarray:
         # a model asking for one time at each RK stage: the batch form for one time rebuilt every piece's weights
         # (12 times linear's cost). The same operations as a batch's row (the same weight rows), so the same bits.
-        if not pieces:
+        if not pieces:  # (two threads may both build them: the same lists, either is right)
             node = np.arange(times.size - 3)[:, None] + np.arange(4)
             x = times[node]
-            pieces.extend(zip(x.tolist(), _barycentric_weights(x).tolist(), values[node].tolist(), node.tolist()))
+            rows = values[node].tolist() if few else [None] * len(node)
+            pieces[:] = zip(x.tolist(), _barycentric_weights(x).tolist(), rows, node.tolist())
         x, w, rows, node = pieces[bisect.bisect_right(inner, t)]
         if t in x:
             return values[node[x.index(t)]].copy()
-        if len(rows[0]) <= FEW_CHANNELS:
+        if few:
             return _barycentric_at(t, x, w, rows)
         d = t - np.array(x)
         return _barycentric_sum(np.array(w) * (np.abs(d).min() / d), values[node])

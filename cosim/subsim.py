@@ -99,12 +99,20 @@ def resolve_params(declared: Mapping[str, Param], given: Mapping[str, Any]) -> d
         number = isinstance(default, (int, float)) and not isinstance(default, bool)
         if number and isinstance(v, bool):  # True is 1 to Python: m = true would run as m = 1
             raise ValueError(f"parameter {k!r} must be a number (its default is {default!r}), got {v!r}")
-        if (number or isinstance(default, (list, tuple)) and _finite_numbers(default)) and not _finite_numbers(v):
-            # a table, or a list holding anything but numbers (a model may take a list where its default is one)
+        if (number or isinstance(default, (list, tuple)) and _finite_numbers(default)) and _holds_words(v):
+            # a table, or a list holding strings or tables (a model may take a list where its default is one; NumPy
+            # numbers and arrays, None, an empty list: the model judges those)
             raise ValueError(f"parameter {k!r} must be a number or numbers (its default is {default!r}), got {v!r}")
         if number and isinstance(default, int) and isinstance(v, float) and not v.is_integer():  # int() truncates
             raise ValueError(f"parameter {k!r} must be a whole number (its default is {default!r}), got {v!r}")
     return {**{k: p.default for k, p in declared.items()}, **given}
+
+
+def _holds_words(v: Any) -> bool:
+    """Whether ``v`` is, or a (nested) list of it holds, a table or a string."""
+    if isinstance(v, (str, Mapping)):
+        return True
+    return isinstance(v, (list, tuple)) and any(_holds_words(x) for x in v)
 
 
 def _finite_numbers(v: Any, allow_other: bool = False) -> bool:

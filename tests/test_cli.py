@@ -373,3 +373,11 @@ def test_the_rejected_tries_of_fixed_intervals_are_said_as_halvings(tmp_path: Pa
     assert re.search(rf"^rejected: {halvings} tries, retried shorter \(not converged: max_halvings\), \d+ stages run "
                      "in them$", done.stdout, re.M), done.stdout
     assert "interval_tol" not in done.stdout
+
+
+def test_round_trip_times_read_as_an_operator_writes_them() -> None:
+    """Two significant digits, never in exponent form: '2.3e+02 ms' (a newcomer probe), '1e+02 ms' (a red team)."""
+    from cosim.cli import _duration
+
+    got = [_duration(x) for x in (0.00052, 0.0012, 0.0996, 0.23, 9.1, 99.7, None)]
+    assert got == ["0.52 ms", "1.2 ms", "100 ms", "230 ms", "9.1 s", "100 s", "?"]

@@ -212,20 +212,26 @@ def test_a_residual_stuck_at_the_round_off_of_its_signal_is_told_to_raise_res() 
     (a newcomer probe). Told so, with the res that passes; not when the stalled residual is far above round-off."""
     from cosim.coupler.relaxation import NotConverged
 
-    level = [4.547e-12] * 6
+    level = [4.547e-12, 2.274e-12] * 4
     said = str(NotConverged(290.0, 300.0, 100, ["node.Q"], {"node.Q": level}, {"node.Q": np.full((5, 1), 19.0)}))
     assert said.splitlines()[-1] == (
         "  to try: res = 1e-11 (the absolute tolerance, in [coupling] or per signal in [tolerances]): node.Q's "
         "residual stopped falling at 4.55e-12, the round-off of values near 19 (a relative 2.4e-13), which no "
         "interval or stage count removes")
-    assert "(last 6)" in said
+    assert "(last 8)" in said
     for values in ({"node.Q": np.full((5, 1), 1e-3)}, None):  # 4.5e-9 relative: not round-off; values not known
         said = str(NotConverged(290.0, 300.0, 100, ["node.Q"], {"node.Q": level}, values))
         assert said.splitlines()[-1].startswith("  to try: a shorter [coupling] interval")
+    # not round-off either (a red team): a channel of small values beside a large one, a slow growth, a slow decay
+    for history, values in (([1e-6, 1.1e-6] * 4, np.column_stack([np.full(5, 7e6), np.full(5, 1e-3)])),
+                            ([1e-12 * 1.04**i for i in range(30)], np.full((5, 1), 1e3)),
+                            ([1e-12 * 0.93**i for i in range(30)], np.full((5, 1), 1e4))):
+        said = str(NotConverged(0.0, 1.0, 30, ["p.x"], {"p.x": history}, {"p.x": values}))
+        assert "res = " not in said, said
     # and from the machine: the stuck signal's own values are what it judges by
     plan = Plan.build({"y": {"u": 1}}, {"y": {"y": 1}}, [Coupling.make("y.u", "y.y", "gain", {"k": -1.0})],
                       "distributed")
-    steps = Relaxation(plan, settings("distributed", max_stages=6, max_halvings=0,
+    steps = Relaxation(plan, settings("distributed", max_stages=12, max_halvings=0,
                                       tol=Tolerance(0.0, 1e-15))).interval(0.0, 0.9)
     action, flip = steps.send(None), 0
     with pytest.raises(NotConverged) as err:
@@ -237,15 +243,21 @@ def test_a_residual_stuck_at_the_round_off_of_its_signal_is_told_to_raise_res() 
     assert "to try: res = 1e-13" in str(err.value) and "values near 100" in str(err.value)
 
 
+class Tagged(np.ndarray):
+    """An ndarray subclass, as a driver of its own might send."""
+
+
 @pytest.mark.parametrize(("answer", "words"), [
     (lambda t: None, "must be {subsim: {output port: (n, width) array}}, got NoneType"),
     (lambda t: {}, "has subsims []: send exactly those the Run asked for"),
     (lambda t: {"y": {"y": np.zeros((t.size, 1))}, "z": {}}, "has subsims ['y', 'z']"),
     (lambda t: {"y": {"v": np.zeros((t.size, 1))}}, "y has ['v'], its outputs are ['y']"),
     (lambda t: {"y": np.zeros((t.size, 1))}, "y has ndarray, its outputs are ['y']"),
-    (lambda t: {"y": {"y": 1.0}}, f"y.y must be a float array of shape ({7}, 1), got float"),
-    (lambda t: {"y": {"y": np.zeros(t.size)}}, "y.y must be a float array of shape (7, 1), got shape (7,)"),
-    (lambda t: {"y": {"y": np.zeros((t.size, 7))}}, "y.y must be a float array of shape (7, 1), got shape (7, 7)"),
+    (lambda t: {"y": {"y": 1.0}}, f"y.y must be a NumPy array of shape ({7}, 1), got float"),
+    (lambda t: {"y": {"y": np.zeros(t.size)}}, "y.y must be a NumPy array of shape (7, 1), got shape (7,)"),
+    (lambda t: {"y": {"y": np.zeros((t.size, 7))}}, "y.y must be a NumPy array of shape (7, 1), got shape (7, 7)"),
+    (lambda t: {"y": {"y": np.zeros((t.size, 1)).view(Tagged)}}, "y.y must be a NumPy array of shape (7, 1), got "
+     "Tagged (an ndarray subclass: send np.asarray of it)"),
 ])
 @pytest.mark.parametrize("method", ["centralized", "distributed"])
 def test_a_drivers_wrong_answer_to_a_run_is_named(method: str, answer, words: str) -> None:

@@ -97,3 +97,14 @@ def test_a_failing_transform_says_what_it_raised_and_where() -> None:
     with pytest.raises(ValueError, match=r"transform 'xf:boom' failed: bad gain \(ValueError at "
                                          r"test_couplings_evaluate\.py:\d+\)$"):
         c.evaluate(_outputs(np.ones((5, 3))), 3, 5)
+
+
+def test_a_transform_failing_inside_numpy_is_located_in_its_own_code() -> None:
+    """``np.reshape(x, (7, 3))`` in a transform was located at fromnumeric.py:54 (a red team)."""
+    def reshaping(y: np.ndarray) -> np.ndarray:
+        return np.reshape(y, (7, 3))
+
+    c = Coupling.make("b.u", "a.y")
+    c = Coupling(c.target, c.sources, reshaping, {}, "xf:reshaping")
+    with pytest.raises(ValueError, match=r"\(ValueError at test_couplings_evaluate\.py:\d+\)$"):
+        c.evaluate(_outputs(np.ones((5, 3))), 3, 5)

@@ -506,8 +506,12 @@ def test_a_subsim_killed_while_it_starts_is_started_again(tmp_path: Path, where:
     assert (tmp_path / f"crashed-{where}").exists()  # it did crash once
     lost = [m for m in said if "lost while starting" in m]
     assert len(lost) == 1 and lost[0].startswith("cosim: mass1 was lost while starting (") and "SIGKILL" in lost[0]
-    assert lost[0].endswith("; starting it again (1 more time at most)"), lost
+    assert lost[0].endswith("; starting it again (1 more restart in this run at most)"), lost
     assert (tmp_path / "x.csv").read_bytes() == (tmp_path / "calm.csv").read_bytes()
     (tmp_path / f"crashed-{where}").unlink()
     with pytest.raises(SubsimError, match="killed by SIGKILL"):
         run_scenario(load(sc), stop=0.2, output=tmp_path / "y.csv", progress=False, log=said.append, restarts=0)
+    (tmp_path / f"crashed-{where}").unlink()  # one restart: used by the start, none left for the run (a red team)
+    said.clear()
+    run_scenario(load(sc), stop=0.2, output=tmp_path / "z.csv", progress=False, log=said.append, restarts=1)
+    assert [m for m in said if "lost while starting" in m][0].endswith("(0 more restarts in this run at most)")

@@ -202,3 +202,15 @@ def test_a_refused_parameter_is_named_whatever_the_model_said(cls: type[Subsim])
                 if name not in exc.message:
                     unnamed.append(f"{name} = {value!r}: {exc.message}")
     assert not unnamed, "\n".join(unnamed)
+
+
+def test_numpy_numbers_and_arrays_are_parameters_as_before() -> None:
+    """The check of a table where numbers are due refused np.int64(2), np.float32 and arrays (a sweep over
+    np.arange through cosim.run(params=...): a red team); only tables and strings are refused by it."""
+    from subsims.oscillator.subsim import Mass
+
+    Runtime(Mass).configure({"idiv": np.int64(2), "k": np.float32(3.0)})
+    Runtime(Integrator).configure({"size": 3, "y0": np.zeros(3)})
+    for value in ({"a": 1}, ["x"], [[1.0], ["y"]]):
+        with pytest.raises(CosimError, match="parameter 'k' must be a number or numbers"):
+            Runtime(Mass).configure({"k": value})

@@ -385,3 +385,13 @@ def test_lagrange_through_too_many_samples_is_refused_where_it_would_give_nan() 
         h.run_interval(t, {"u": np.ones((n + 1, 1))}, interp="lagrange")
     with pytest.raises(ValueError, match="at most 64"):
         Settings(interval=0.1, samples=65, interp="lagrange")
+
+
+@pytest.mark.parametrize("scheme", ["lagrange", "cubic"])
+def test_one_time_far_outside_the_grid_gives_what_the_batch_gives(scheme: str) -> None:
+    """On Python floats the scalar form raised ZeroDivisionError where the weights sum to zero (t = 1e20 on a grid
+    0 .. 0.2); the batch form gives NaN there (a red team)."""
+    f = Segment(np.linspace(0.0, 0.2, 3 if scheme == "lagrange" else 6), np.ones((3 if scheme == "lagrange" else 6,
+                                                                              2))).interpolant(scheme)
+    with np.errstate(all="ignore"):
+        assert f(1e20).tobytes() == f(np.array([1e20]))[0].tobytes()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+import sysconfig
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from difflib import get_close_matches
@@ -94,10 +95,17 @@ class Coupling:
 Ports = Mapping[str, Mapping[str, int]]  # subsim -> port -> width
 
 
+_LIBRARIES = tuple({p for k in ("stdlib", "purelib", "platlib") if (p := sysconfig.get_paths().get(k))}) + (
+    str(PurePath(__file__).parents[1]),)  # (cosim itself: an editable install is in neither)
+
+
 def _raised_at(exc: BaseException) -> str:
-    """`` at file.py:12``: where in a transform's own code ``exc`` came from (its innermost frame)."""
-    frames = extract_tb(exc.__traceback__)
-    return f" at {PurePath(frames[-1].filename).name}:{frames[-1].lineno}" if len(frames) > 1 else ""
+    """`` at file.py:12``: where in a transform's own code ``exc`` came from (its innermost frame outside Python's
+    library, installed packages and cosim: not numpy's fromnumeric.py)."""
+    for frame in reversed(extract_tb(exc.__traceback__)[1:]):
+        if frame.filename and not frame.filename.startswith(_LIBRARIES) and not frame.filename.startswith("<"):
+            return f" at {PurePath(frame.filename).name}:{frame.lineno}"
+    return ""
 
 
 class TransformError(ValueError):

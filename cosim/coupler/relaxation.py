@@ -211,19 +211,24 @@ class NotConverged(RuntimeError):
         self.t0, self.t1, self.stages, self.failing, self.residuals = t0, t1, stages, failing, residuals
 
 
-ROUNDOFF = 1e-9  # a stalled residual this small against its signal's values is taken for their round-off
+ROUNDOFF = 1e-11  # a flat residual this small against its signal's values is taken for their round-off (45,000
+# ulps: what a gain makes of a settling input's last bits; a real iteration at that level still moves)
 
 
 def _roundoff(failing: Sequence[str], residuals: Mapping[str, list[float]], values: Mapping[str, np.ndarray] | None
               ) -> tuple[str, float, float] | None:
-    """(signal, its stalled residual, its largest |value|) with the largest residual, when every failing signal's
-    residual is within ``ROUNDOFF`` of its values' size (a cycle in the last bits, as a settling signal fed
-    through a gain makes); else None."""
+    """(signal, its residual, the size of its values) with the largest residual, when every failing signal's
+    residual has stayed flat over its last 8 stages (each window of 4's largest within 10 % of the one before: no
+    slow contraction or growth) within ``ROUNDOFF`` of its values' size, the smallest channel's (a cycle in the
+    last bits, as a settling signal fed through a gain makes); else None."""
     if not values:
         return None
     found = []
     for name in failing:
-        size, level = float(np.max(np.abs(values[name]), initial=0.0)), max(residuals[name][-4:])
+        r = residuals[name]
+        if len(r) < 8 or not 0.9 <= max(r[-4:]) / max(max(r[-8:-4]), 1e-300) <= 1.1:
+            return None
+        size, level = float(np.min(np.max(np.abs(values[name]), axis=0), initial=np.inf)), max(r[-4:])
         if not 0.0 < level <= ROUNDOFF * size:
             return None
         found.append((level, name, size))
@@ -356,8 +361,9 @@ def _misanswered(got: Any, asked: Mapping[str, Any], n: int, outputs: Mapping[st
         for port, w in widths.items():
             v = ports[port]
             if type(v) is not np.ndarray or v.shape != (n, w):
-                what = f"shape {v.shape}" if isinstance(v, np.ndarray) else type(v).__name__
-                return f"{head}: {name}.{port} must be a float array of shape ({n}, {w}), got {what}"
+                what = f"shape {v.shape}" if type(v) is np.ndarray else type(v).__name__ + (
+                    " (an ndarray subclass: send np.asarray of it)" if isinstance(v, np.ndarray) else "")
+                return f"{head}: {name}.{port} must be a NumPy array of shape ({n}, {w}), got {what}"
     return head  # (not reached)
 
 
