@@ -186,7 +186,7 @@ class _Inputs(dict):
 def _naming(said: str, given: Mapping[str, Any]) -> str:
     """A model's refusal of its parameters that names none of them ("could not convert string to float: 'x'"),
     with the one whose value holds what it quotes, or else the names given."""
-    if not given or any(str(k) in said for k in given):
+    if not given or any(re.search(rf"(?<!\w){re.escape(str(k))}(?!\w)", said) for k in given):  # (as a word: 'k')
         return said
     quoted = re.findall(r"'([^']*)'", said)
     hits = [k for k, v in given.items() if any(f"'{q}'" in repr(v) for q in quoted)]
