@@ -249,21 +249,43 @@ def _barycentric_at(t: float, x: list[float], w: list[float], rows: list[list[fl
     return np.array([n / den for n in num])
 
 
+class _Piece(NamedTuple):
+    """What one time on the polynomial through some samples needs: their times (a list and an array), weights and
+    sample rows, and the last two as Python lists when there are few channels (else None)."""
+
+    xs: list[float]
+    x: np.ndarray
+    w: np.ndarray
+    vals: np.ndarray
+    lists: tuple[list[float], list[list[float]]] | None
+
+
+def _piece(x: np.ndarray, w: np.ndarray, vals: np.ndarray) -> _Piece:
+    few = x.size >= 2 and vals.shape[1] <= FEW_CHANNELS
+    return _Piece(x.tolist(), x, w, vals, (w.tolist(), vals.tolist()) if few else None)
+
+
+def _at_one(p: _Piece, t: float) -> np.ndarray:
+    """The polynomial of piece ``p`` at one time: a sample itself on a node, else the scaled barycentric form."""
+    if t in p.xs:
+        return p.vals[p.xs.index(t)].copy()
+    if p.lists is not None:
+        return _barycentric_at(t, p.xs, *p.lists)
+    d = t - p.x
+    c = p.w * (np.abs(d).min() / d)  # scaled: w / d overflows when t is within rounding of a node
+    return _barycentric_sum(c, p.vals)
+
+
 def _barycentric(nodes: np.ndarray, vals: np.ndarray) -> Interpolant:
     """Polynomial through all ``nodes`` (second barycentric form, stable for small n)."""
     x = nodes
     w = _barycentric_weights(x)
-    xs = x.tolist()
-    few = (w.tolist(), vals.tolist()) if x.size >= 2 and vals.shape[1] <= FEW_CHANNELS else None
+    made: list[_Piece] = []  # made at the first call for one time (an interpolant of a batch alone never needs it)
 
     def at(t: float) -> np.ndarray:
-        if t in xs:
-            return vals[xs.index(t)].copy()
-        if few is not None:
-            return _barycentric_at(t, xs, *few)
-        d = t - x
-        c = w * (np.abs(d).min() / d)  # scaled: w / d overflows when t is within rounding of a node
-        return _barycentric_sum(c, vals)
+        if not made:
+            made.append(_piece(x, w, vals))
+        return _at_one(made[0], t)
 
     def compute(times: np.ndarray, ts: np.ndarray) -> _Weights:
         return _piece_weights(ts, times[None, :], w[None, :], np.zeros(ts.size, dtype=np.intp),
@@ -311,24 +333,16 @@ def _cubic(times: np.ndarray, values: np.ndarray) -> Interpolant:
         return _apply(_weights("cubic", times, ts, _cubic_weights), values)
 
     inner = times[2:-2].tolist()
-    pieces: list = []  # per piece: its times, their weights, the rows of its samples (None: many channels), nodes
-    few = values.shape[1] <= FEW_CHANNELS
+    pieces: list[_Piece] = []  # each piece's, made at the first call for one time
 
     def at(t: float) -> np.ndarray:
         # a model asking for one time at each RK stage: the batch form for one time rebuilt every piece's weights
         # (12 times linear's cost). The same operations as a batch's row (the same weight rows), so the same bits.
-        if not pieces:  # (two threads may both build them: the same lists, either is right)
+        if not pieces:  # (two threads may both build them: equal pieces, either is right)
             node = np.arange(times.size - 3)[:, None] + np.arange(4)
             x = times[node]
-            rows = values[node].tolist() if few else [None] * len(node)
-            pieces[:] = zip(x.tolist(), _barycentric_weights(x).tolist(), rows, node.tolist())
-        x, w, rows, node = pieces[bisect.bisect_right(inner, t)]
-        if t in x:
-            return values[node[x.index(t)]].copy()
-        if few:
-            return _barycentric_at(t, x, w, rows)
-        d = t - np.array(x)
-        return _barycentric_sum(np.array(w) * (np.abs(d).min() / d), values[node])
+            pieces[:] = map(_piece, x, _barycentric_weights(x), values[node])
+        return _at_one(pieces[bisect.bisect_right(inner, t)], t)
 
     return _vectorized(at, batch)
 
