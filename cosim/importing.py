@@ -15,6 +15,7 @@ import importlib.machinery
 import importlib.util
 import os
 import sys
+import sysconfig
 import traceback
 from collections.abc import Sequence
 from pathlib import Path
@@ -111,6 +112,19 @@ def use_search_path(directories: Sequence[str]) -> None:
     sys.path[:] = [p for p in sys.path if os.path.abspath(p or ".") not in gone]
     add_search_path(*directories)
     importlib.invalidate_caches()
+
+
+_LIBRARIES = tuple({p for k in ("stdlib", "purelib", "platlib") if (p := sysconfig.get_paths().get(k))}) + (
+    os.path.dirname(os.path.abspath(__file__)) + os.sep,)  # (cosim itself: an editable install is in neither)
+
+
+def own_frame(exc: BaseException, skip: int = 1) -> traceback.FrameSummary | None:
+    """The innermost frame of ``exc``'s traceback, past its ``skip`` outermost (the catcher's own), that is a user's
+    code: outside the standard library, installed packages (NumPy's fromnumeric.py) and cosim; None if none is."""
+    for frame in reversed(traceback.extract_tb(exc.__traceback__)[skip:]):
+        if frame.filename and not frame.filename.startswith(_LIBRARIES) and not frame.filename.startswith("<"):
+            return frame
+    return None
 
 
 def _where(exc: Exception) -> str:

@@ -11,7 +11,6 @@ import hashlib
 import math
 import os
 import re
-import sysconfig
 import traceback
 from collections import deque
 from collections.abc import Callable, Mapping
@@ -20,6 +19,7 @@ from typing import Any, NamedTuple, NoReturn
 import numpy as np
 
 from cosim.contract import PROTOCOL_VERSION, CosimError
+from cosim.importing import own_frame
 from cosim.signals import SegmentError, check_scheme, check_time_grid, interpolant
 from cosim.subsim import IntervalTooLong, ModelError, Port, Subsim, as_ports, resolve_params
 
@@ -164,15 +164,9 @@ def maker_name(factory: Any) -> str:
 
 
 def _model_line(exc: BaseException) -> str:
-    """`` (file.py:12 in helper)``: the innermost frame outside installed packages, the standard library and cosim
-    (an editable install is none of the first two)."""
-    libraries = tuple(p for p in {sysconfig.get_paths()[k] for k in ("stdlib", "purelib", "platlib")} if p) + (
-        os.path.dirname(os.path.abspath(__file__)) + os.sep,)
-    own = exc.__traceback__.tb_next if exc.__traceback__ is not None else None  # the runtime's frame left out
-    for frame in reversed(traceback.extract_tb(own)):
-        if frame.filename and not frame.filename.startswith(libraries) and not frame.filename.startswith("<"):
-            return f" ({os.path.basename(frame.filename)}:{frame.lineno} in {frame.name})"
-    return ""
+    """`` (file.py:12 in helper)``: the innermost frame of the model's own code (the runtime's frame left out)."""
+    frame = own_frame(exc)
+    return f" ({os.path.basename(frame.filename)}:{frame.lineno} in {frame.name})" if frame is not None else ""
 
 
 class _Inputs(dict):

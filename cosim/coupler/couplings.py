@@ -3,17 +3,16 @@
 from __future__ import annotations
 
 import re
-import sysconfig
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from difflib import get_close_matches
 from inspect import signature
 from pathlib import PurePath
-from traceback import extract_tb
 from typing import Any
 
 import numpy as np
 
+from cosim.importing import own_frame
 from cosim.transforms import BUILTIN, Transform, identity, resolve
 
 _F8 = np.dtype(np.float64)
@@ -95,17 +94,10 @@ class Coupling:
 Ports = Mapping[str, Mapping[str, int]]  # subsim -> port -> width
 
 
-_LIBRARIES = tuple({p for k in ("stdlib", "purelib", "platlib") if (p := sysconfig.get_paths().get(k))}) + (
-    str(PurePath(__file__).parents[1]),)  # (cosim itself: an editable install is in neither)
-
-
 def _raised_at(exc: BaseException) -> str:
-    """`` at file.py:12``: where in a transform's own code ``exc`` came from (its innermost frame outside Python's
-    library, installed packages and cosim: not numpy's fromnumeric.py)."""
-    for frame in reversed(extract_tb(exc.__traceback__)[1:]):
-        if frame.filename and not frame.filename.startswith(_LIBRARIES) and not frame.filename.startswith("<"):
-            return f" at {PurePath(frame.filename).name}:{frame.lineno}"
-    return ""
+    """`` at file.py:12``: where in a transform's own code ``exc`` came from (not NumPy's fromnumeric.py)."""
+    frame = own_frame(exc)
+    return f" at {PurePath(frame.filename).name}:{frame.lineno}" if frame is not None else ""
 
 
 class TransformError(ValueError):
