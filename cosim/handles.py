@@ -112,7 +112,8 @@ class SubsimHandle:
     ) -> Pending:
         """Send ``run_interval`` now, wait later. ``commit``: commit the latest trial first, in the same request."""
         args = {"t": np.asarray(times), "interp": interp,
-                "inputs": {k: v if type(v) is np.ndarray else self._as_array(k, v) for k, v in inputs.items()}}
+                "inputs": {k: v if type(v) is np.ndarray and v.dtype.kind == "f" else self._as_array(k, v)
+                           for k, v in inputs.items()}}
         if commit:
             args["commit"] = True
         wait = self._begin("run_interval", args)

@@ -516,6 +516,8 @@ class Runtime:
             v = inputs[name]
             if type(v) is not np.ndarray or v.dtype != np.float64:
                 try:
+                    if np.iscomplexobj(v):  # (a cast would drop the imaginary part with only a warning)
+                        raise TypeError("complex")
                     v = np.asarray(v, dtype=np.float64)
                 except (TypeError, ValueError):
                     raise CosimError("bad_value", f"inputs.{name}: not a float array") from None

@@ -276,7 +276,8 @@ def test_samples_given_as_lists_run_the_same_in_one_process_and_remotely(handle:
     as_lists = {"u": ramp(TIMES)["u"].tolist()}
     got = handle.run_interval(TIMES.tolist(), as_lists).outputs["y"]
     assert got.tobytes() == handle.run_interval(TIMES, ramp(TIMES)).outputs["y"].tobytes()
-    for bad in ([[1.0, 2.0]] * (N - 1) + [[1.0]], [[1j, 2.0]] * N):  # ragged; complex (a raw TypeError: red team)
+    # ragged; complex (a raw TypeError: red team); a complex array (in one process: cast, the imaginary part dropped)
+    for bad in ([[1.0, 2.0]] * (N - 1) + [[1.0]], [[1j, 2.0]] * N, np.full((N, 2), 1.0 + 2j)):
         with pytest.raises(SubsimError) as err:
             handle.run_interval(TIMES, {"u": bad})
         assert (err.value.code, err.value.message) == ("bad_value", "inputs.u: not a float array"), err.value
