@@ -34,7 +34,7 @@ def one(sig: int) -> tuple[float, float]:
             h.configure(PARAMS[n])
         marks: dict[str, float] = {}
 
-        def revive(name: str):
+        def revive(name: str, why: str):
             marks.setdefault("detected", time.monotonic())
             handle = bus.respawn(name, quiet=True).handle
             handle.configure(PARAMS[name])

@@ -50,7 +50,7 @@ OnStage = Callable[[int, Outputs], None]
 # Called with each committed interval, in order; if it returns an iterator, the interval is recorded one item
 # at a time, in the coordinator's idle moments (``cosim.runner`` writes a result file so).
 OnInterval = Callable[[Interval], Iterable[object] | None]
-Revive = Callable[[str], SubsimHandle]  # a new process for the named subsim, configured at the run's start
+Revive = Callable[[str, str], SubsimHandle]  # (name, why it was lost): a new process, configured at the run start
 OnCheckpoint = Callable[[ResumePoint, dict[str, SubsimState]], None]  # every subsim's committed state there
 
 
@@ -109,6 +109,11 @@ class Recovery:
     restarts: int = 2
     checkpoint_every: int = 200
     log: Callable[[str], None] = print
+
+
+class Abandoned(SubsimError):
+    """Raised by a :data:`Revive`: the lost subsim was waited for as long as the run allows and did not come back (an
+    external one not started again): the run stops with this, and no other replacement is tried or counted."""
 
 
 @dataclass(frozen=True)
@@ -518,10 +523,10 @@ class Coordinator:
         self.handles[name].close()
         while True:
             try:
-                handle, at, replayed = self._restored(name)
+                handle, at, replayed = self._restored(name, reason)
                 break
             except Exception as exc:
-                if not _lost_while_restoring(exc):
+                if isinstance(exc, Abandoned) or not _lost_while_restoring(exc):
                     raise
                 checkpoint = self._checkpoints.get(name)
                 self.restarts.append(Restart(name, checkpoint.time if checkpoint else math.nan, reason, 0,
@@ -543,10 +548,11 @@ class Coordinator:
                  f"the restart of that pause, {self._used()} of {self.recovery.restarts} used")
         self.recovery.log(f"cosim: {name} {reason}; replaced ({count}), {where}")
 
-    def _restored(self, name: str) -> tuple[SubsimHandle, float, int]:
-        """A new process for ``name`` in its committed state: its handle, that time, and the intervals replayed."""
+    def _restored(self, name: str, reason: str) -> tuple[SubsimHandle, float, int]:
+        """A new process for ``name`` (lost for ``reason``) in its committed state: its handle, that time, and the
+        intervals replayed."""
         assert self.recovery is not None
-        handle = self.recovery.revive(name)
+        handle = self.recovery.revive(name, reason)
         try:
             checkpoint = self._checkpoints.get(name)
             if checkpoint is None:  # dead before the first checkpoint, taken before the first interval: revive()

@@ -21,7 +21,7 @@ from cosim.contract import MalformedReply, SubsimError
 from cosim.coupler.couplings import CouplingError, SignalRef
 from cosim.coupler.plan import Plan
 from cosim.coupler.relaxation import Interval, RunSummary, Settings
-from cosim.driver import Coordinator, Deadline, Recovery, plan_for
+from cosim.driver import Abandoned, Coordinator, Deadline, Recovery, plan_for
 from cosim.handles import Description, InProcessHandle, SubsimHandle
 from cosim.launch import PRIVATE, UNSPECIFIED_HOSTS, Bus, Elsewhere, SubsimProcess, endpoint_for
 from cosim.outputs import OutputError, reserve_output, resume_path
@@ -85,20 +85,24 @@ class Session:
     listen: str | None = None  # the router endpoint asked for (--listen): what external subsims are told
     restarts_left: int = 0  # the run's restarts not used by subsims lost while they started
 
-    def revive(self, name: str) -> SubsimHandle:
-        """A new process for a subsim that died or hung, configured as at the run's start: a launched one is
-        killed and started again; an external one is waited for to attach again under its name."""
+    def revive(self, name: str, why: str = "") -> SubsimHandle:
+        """A new process for a subsim that died or hung (``why``: how), configured as at the run's start: a launched
+        one is killed and started again; an external one is waited for to attach again under its name, once (one
+        that does not come back within the wait stops the run: :class:`Abandoned`)."""
         if self.bus is None:
             raise ScenarioError(f"{self.scenario.path}: {name} failed in-process: nothing to restart")
         spec = self.scenario.subsims[name]
-        if spec.external:  # nothing else is printed until it is back: say what is awaited, and from whom
-            self.log(f"cosim: external subsim {name!r} must attach again; waiting up to {self.external_wait:g} s for "
-                     "it (once the old process has exited: two copies answering as one stop the run)\n"
-                     + attach_lines(self.bus, self.scenario, name, self.listen, first=False))
+        if spec.external:  # nothing else is printed until it is back: say why, what is awaited, and from whom
+            self.log(f"cosim: external subsim {name!r} {why or 'was lost'}; it must attach again: waiting up to "
+                     f"{self.external_wait:g} s for it (once the old process has exited: two copies answering as one "
+                     "stop the run)\n" + attach_lines(self.bus, self.scenario, name, self.listen, first=False))
             # not a first start's '--run and --name': the same command, not started again
-            handle: SubsimHandle = attach(self.bus, self.scenario, name, self.timeout, self.external_wait,
-                                          f"it did not attach again within {self.external_wait:g} s (its command is "
-                                          "above; --attach-wait sets how long it is waited for)")
+            try:
+                handle: SubsimHandle = attach(self.bus, self.scenario, name, self.timeout, self.external_wait,
+                                              f"it did not attach again within {self.external_wait:g} s (its command "
+                                              "is above; --attach-wait sets how long it is waited for)")
+            except NotAppeared as exc:  # waited for as long as asked: another wait would only double it
+                raise Abandoned(exc.code, exc.message, name, exc.command) from None
         elif spec.launcher:
             handle = self._respawn_elsewhere(name)
         else:
@@ -117,8 +121,11 @@ class Session:
             try:
                 return self.bus.respawn(name, timeout=self.timeout).handle
             except SubsimError as exc:
-                if exc.command not in ("spawn", "connect") or time.monotonic() + RETRY_ELSEWHERE > give_up:
+                if exc.command not in ("spawn", "connect"):
                     raise
+                if time.monotonic() + RETRY_ELSEWHERE > give_up:  # tried for as long as an external one is waited for
+                    raise Abandoned(exc.code, f"{exc.message} (tried again for {self.external_wait:g} s, "
+                                    "--attach-wait)", name, exc.command) from None
                 if not told:
                     told = True
                     self.log(f"cosim: {name} could not be started again over there ({exc.message}); trying again "
