@@ -21,6 +21,7 @@ import threading
 import time
 from collections.abc import Sequence
 from pathlib import Path
+from typing import NoReturn
 
 import zenoh
 
@@ -114,12 +115,18 @@ def parse_args(model_cls: type[Subsim] | Subsim, argv: Sequence[str] | None,
             os.environ.pop(name, None)
         _check_login_names(args.security.login, args.run, args.name)
     except ValueError as exc:
-        p.error(str(exc))
+        _refuse(p, str(exc))
     if args.max_request is not None and args.max_request < 1:
-        p.error("--max-request must be a positive number of bytes")
+        _refuse(p, "--max-request must be a positive number of bytes")
     if args.queue < 1:
-        p.error("--queue must be at least 1")
+        _refuse(p, "--queue must be at least 1")
     return args
+
+
+def _refuse(parser: argparse.ArgumentParser, message: str) -> NoReturn:
+    """A value the options parsed but that cannot serve: one line, without the usage text argparse puts above its
+    own errors (15 lines before the one that says what to change: a multi-host probe)."""
+    parser.exit(2, f"{parser.prog}: error: {message}\n")
 
 
 def unreachable(endpoint: str, timeout: float) -> tuple[str | None, bool]:

@@ -291,6 +291,8 @@ def test_a_tls_file_that_is_not_there_is_named_at_start(tmp_path: Path) -> None:
     done = subprocess.run(cmd, capture_output=True, text=True, timeout=30, cwd=tmp_path,
                           env={**os.environ, "COSIM_SECRET": "00" * 32})
     assert done.returncode == 2 and f"--tls-ca certs/ca.pem: no such file (in {tmp_path})" in done.stderr
+    # that line alone, not after argparse's usage text (a multi-host probe: 15 lines above the one that matters)
+    assert done.stderr.count("\n") == 1 and done.stderr.startswith("python -m subsims.integrator: error: "), done.stderr
 
 
 def test_a_death_is_put_down_to_a_pause_of_the_coordinator_only_when_that_explains_it(
