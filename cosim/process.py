@@ -47,6 +47,7 @@ def _raise_stop(signum: int, frame: object) -> None:
 
 
 _router_lost = threading.Event()  # nothing to close politely: Zenoh's close would wait for it about 8 s
+EXIT_LINK_LOST = 3  # the router was lost (a cut link, or the coordinator's end): for a supervisor to start it again
 
 
 def _stop_self(why: str) -> None:
@@ -174,7 +175,12 @@ def _check_login_names(login: tuple[str, str] | None, run: str, name: str) -> No
                      f"--name {name}: start it with the run id and name the coordinator printed with it")
 
 
-def _watch_router(session: zenoh.Session, grace: float = 2.0) -> None:
+ROUTER_GRACE = 2.0  # s without a router before a subsim stops
+LINK_LOST = (f"as the coordinator's router has been unreachable for {ROUTER_GRACE:g} s; if the coordinator still runs "
+             "(a cut link), start this same command again: the run restores this subsim")
+
+
+def _watch_router(session: zenoh.Session, grace: float = ROUTER_GRACE) -> None:
     """SIGTERM ourselves when the coordinator's router has been unreachable for ``grace`` seconds.
 
     A client whose router vanished gets no liveliness DELETE (its only link is gone), so poll.
@@ -190,7 +196,7 @@ def _watch_router(session: zenoh.Session, grace: float = 2.0) -> None:
         lost_since = None if connected else (lost_since or now)
         if lost_since is not None and now - lost_since >= grace:
             _router_lost.set()
-            _stop_self(f"as the coordinator's router has been unreachable for {grace:g} s")
+            _stop_self(LINK_LOST)
             return
 
 
@@ -265,6 +271,6 @@ def main(model_cls: type[Subsim] | Subsim, argv: Sequence[str] | None = None, pr
         if _router_lost.is_set():  # the router is gone: leave now (the system closes our sockets)
             sys.stdout.flush()
             sys.stderr.flush()
-            os._exit(0)
+            os._exit(EXIT_LINK_LOST if _why_stopping[:1] == [LINK_LOST] else 0)  # not if it was stopping anyway
         session.close()
     return 0

@@ -176,6 +176,7 @@ def test_how_long_a_cut_link_takes_to_notice(hosts: Hosts, tmp_path: Path) -> No
         assert report["noticed"]
         subsim_rc = subsim.wait(60)
         print(f"the cut-off subsim exited with code {subsim_rc} {time.monotonic() - cut:.2f} s after the cut")
+        assert subsim_rc == 3  # not 0: a supervisor (Restart=on-failure) starts it again (multi-host probe)
     finally:
         _stop(watcher)
         if subsim is not None:
