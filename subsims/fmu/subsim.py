@@ -232,10 +232,16 @@ class FmuSubsim(Subsim):
         if unused:
             raise ValueError(f"{unused[0]} in {info.path.name} is {info.unused[unused[0]]}")
         unknown = sorted(k for k in given if k not in info.settable)
+        outputs = sorted(k for k in unknown if k in {v.name for v in info.outputs})
+        if outputs:
+            what = "is an output" if len(outputs) == 1 else "are outputs"
+            raise ValueError(f"{outputs} in {info.path.name} {what}, which the FMU computes: not a parameter; "
+                             f"settable: {', '.join(sorted(info.settable)) or 'none'}")
         if unknown:
             known = ", ".join(sorted(info.settable)) or "none"
-            close = [f"{k!r} for {match!r}" for k in unknown if (match := closest(k, [*info.settable, *SETTINGS]))]
-            hint = f" (did you mean {', '.join(close)}?)" if close else ""
+            close = {k: match for k in unknown if (match := closest(k, [*info.settable, *SETTINGS]))}
+            hint = (f" (did you mean {close[unknown[0]]!r}?)" if len(unknown) == 1 and close else
+                    f" (did you mean {', '.join(f'{m!r} for {k!r}' for k, m in close.items())}?)" if close else "")
             raise ValueError(f"unknown FMU variable(s) {unknown} in {info.path.name}{hint}; settable: {known} "
                              f"(subsim settings: {', '.join(sorted(SETTINGS))})")
         same: dict[int, str] = {}  # value reference -> the name it was given under

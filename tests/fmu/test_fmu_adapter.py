@@ -66,8 +66,11 @@ def test_ports_and_metadata_come_from_the_model_description(fmus: dict[str, Path
     ("params", "phrase"),
     [
         ({"mass": 1.0}, "unknown FMU variable(s) ['mass'] in mass2.fmu; settable: k, m, u0, v0"),
-        ({"u": 1.0}, "unknown FMU variable(s) ['u']"),  # an output with initial="calculated"
-        ({"v_0": 1.0}, "unknown FMU variable(s) ['v_0'] in mass2.fmu (did you mean 'v_0' for 'v0'?); settable: k, m, "),
+        ({"v_0": 1.0}, "unknown FMU variable(s) ['v_0'] in mass2.fmu (did you mean 'v0'?); settable: k, m, "),
+        # the hint named the wrong one first ('v_0' for 'v0'), and an output was a typo for a start value
+        ({"v_0": 1.0, "kk": 2.0}, "unknown FMU variable(s) ['kk', 'v_0'] in mass2.fmu (did you mean 'k' for 'kk', "
+                                  "'v0' for 'v_0'?)"),
+        ({"u": 1.0}, "['u'] in mass2.fmu is an output, which the FMU computes: not a parameter; settable: k, m, "),
         ({"F": 1.0}, "['F'] in mass2.fmu is a real input: a port, fed by a coupling or held constant in the "
                      "scenario's [subsims.<name>.inputs] (F = [value]), not a parameter"),
         ({"m": "heavy"}, "m is Real: needs a finite number, got 'heavy'"),
