@@ -252,6 +252,9 @@ def load(path: str | Path) -> Scenario:
     except IsADirectoryError:
         raise ScenarioError(f"{path} is a directory: give a scenario file (.toml) in it") from None
     except UnicodeDecodeError:
+        if suffix in _plugins("cosim.subsim_shorthands"):  # e.g. an .fmu given to cosim run (an FMI probe)
+            raise ScenarioError(f"{path}: a .{suffix} file, not a scenario: couple it in a scenario (TOML), in a "
+                                f"[subsims.<name>] table with {suffix} = {path.name!r}") from None
         raise ScenarioError(f"{path}: not a text file, so not a scenario (TOML)") from None
     except OSError as exc:
         raise ScenarioError(f"{path}: cannot read it ({exc.strerror or exc})") from None

@@ -55,12 +55,16 @@ def expand_fmu(spec: Mapping[str, Any], scenario: Path, start: float, key: str) 
     params = table.get("params", {})
     if not isinstance(params, dict):
         raise ScenarioError(f"{scenario}: [{key}.params] must be a table")
+    if "fmu" in params:  # (params.fmu was dropped for fmu = ... without a word: an FMI probe)
+        raise ScenarioError(f"{scenario}: [{key}] names its FMU twice, fmu = {fmu!r} and params.fmu = "
+                            f"{params['fmu']!r}: give fmu = ... only")
     if "launcher" in table:  # started on another machine: a path there, relative to its workdir
         params = {**params, "fmu": fmu}
     else:
         resolved = (scenario.parent / fmu).resolve()
         if not table.get("external", False) and not resolved.is_file():  # launched here: a typo, found at load
-            raise ScenarioError(f"{scenario}: [{key}.fmu] no such file: {resolved}")
+            what = "a directory, not an .fmu file" if resolved.is_dir() else "no such file"
+            raise ScenarioError(f"{scenario}: [{key}.fmu] {what}: {resolved}")
         params = {**params, "fmu": str(resolved)}
     if start != 0.0:
         params.setdefault("start_time", start)

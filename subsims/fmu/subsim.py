@@ -42,10 +42,21 @@ from subsims.fmu.fmu import FmiCallError, FmuError, FmuInfo, Instance, RealPorts
 
 SETTINGS = {"fmu", "interface", "substeps", "solver", "rtol", "atol", "max_step", "tolerance", "state_capacity",
             "start_time", "values"}
+CS_ONLY = ("substeps",)  # settings of one interface only
+ME_ONLY = ("solver", "rtol", "atol", "max_step")
 MAGIC = 46_707_781.0  # first element of every FMU state vector
 BYTES_PER_FLOAT = 6
 SOLVER_CLASSES = {"RK45": RK45, "RK23": RK23, "DOP853": DOP853, "Radau": Radau, "BDF": BDF, "LSODA": LSODA}
 SOLVERS = tuple(SOLVER_CLASSES)
+
+
+def _other_interface(names: list[str], kind: str, fmu: str) -> str:
+    """The refusal of settings for the interface not used."""
+    if kind == "cs":
+        return (f"{', '.join(names)}: model-exchange setting(s), and {fmu} runs as co-simulation (interface = 'cs'), "
+                "stepped by its own solver (its tolerance: 'tolerance'); for cosim's solver: interface = 'me'")
+    return (f"{', '.join(names)}: a co-simulation setting, and {fmu} runs as model exchange (interface = 'me'), "
+            "integrated by solve_ivp: set solver, rtol, atol or max_step, or interface = 'cs'")
 
 
 def encode_state(data: bytes, capacity: int) -> np.ndarray:
@@ -156,6 +167,9 @@ class FmuSubsim(Subsim):
             raise ValueError(f"interface {kind!r} not available in {info.path.name}; it offers {offered}")
         if not info.can_serialize[kind]:  # (the FMU, not a parameter, is at fault: not "bad parameter")
             raise ModelError(self._no_state_message(info, kind))
+        other = sorted(k for k in params if k in (ME_ONLY if kind == "cs" else CS_ONLY))
+        if other:  # (they were taken and did nothing: an FMI probe)
+            raise ValueError(_other_interface(other, kind, info.path.name))
         self.substeps = self._int(params.get("substeps", 1), "substeps")
         self.solver = params.get("solver", "DOP853")
         if self.solver not in SOLVERS:

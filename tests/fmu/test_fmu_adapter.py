@@ -77,6 +77,11 @@ def test_ports_and_metadata_come_from_the_model_description(fmus: dict[str, Path
         ({"m": True}, "m is Real: needs a finite number, got True"),
         ({"interface": "scheduled"}, "interface 'scheduled' not available in mass2.fmu; it offers 'cs', 'me'"),
         ({"substeps": 0}, "substeps must be a positive integer, got 0"),
+        # a setting of the other interface did nothing (an FMI probe)
+        ({"rtol": 1e-6, "max_step": 0.1}, "max_step, rtol: model-exchange setting(s), and mass2.fmu runs as "
+                                          "co-simulation (interface = 'cs'), stepped by its own solver"),
+        ({"interface": "me", "substeps": 4}, "substeps: a co-simulation setting, and mass2.fmu runs as model "
+                                             "exchange (interface = 'me'), integrated by solve_ivp"),
         ({"values": {"m": 2.0}}, "['m'] given both in params and in params.values"),
         ({"k": -1.0}, "initialization failed: ExitInitializationMode: fmi2ExitInitializationMode failed with status "
                       "3 (error): m and k must be positive"),

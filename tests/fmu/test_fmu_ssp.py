@@ -204,6 +204,24 @@ def test_fmu_shorthand_resolves_against_the_scenario_and_refuses_model_too(tmp_p
         load(path)
     path.write_text('stop = 1.0\n[coupling]\ninterval = 0.5\n[subsims.a]\nfmu = "elsewhere.fmu"\nexternal = true\n')
     assert load(path).subsims["a"].params["fmu"] == str(tmp_path / "sub" / "elsewhere.fmu")  # its own copy there
+    # what an FMI probe met: params.fmu beside fmu = ... was dropped without a word; a directory was "no such file";
+    # an FMU given to cosim run was "not a text file"
+    path.write_text('stop = 1.0\n[coupling]\ninterval = 0.5\n[subsims.a]\nfmu = "../m.fmu"\n'
+                    'params = { fmu = "other.fmu" }\n')
+    with pytest.raises(ScenarioError) as err:
+        load(path)
+    assert str(err.value) == (f"{path}: [subsims.a] names its FMU twice, fmu = '../m.fmu' and params.fmu = "
+                              "'other.fmu': give fmu = ... only")
+    (tmp_path / "d.fmu").mkdir()
+    path.write_text('stop = 1.0\n[coupling]\ninterval = 0.5\n[subsims.a]\nfmu = "../d.fmu"\n')
+    with pytest.raises(ScenarioError) as err:
+        load(path)
+    assert str(err.value) == f"{path}: [subsims.a.fmu] a directory, not an .fmu file: {tmp_path / 'd.fmu'}"
+    (tmp_path / "m.fmu").write_bytes(b"PK\x03\x04\xff\xfe")
+    with pytest.raises(ScenarioError) as err:
+        load(tmp_path / "m.fmu")
+    assert str(err.value) == (f"{tmp_path / 'm.fmu'}: a .fmu file, not a scenario: couple it in a scenario (TOML), in "
+                              "a [subsims.<name>] table with fmu = 'm.fmu'")
 
 
 @pytest.mark.parametrize("name", ["../../cosim-test-escaped", "mass.1"])
