@@ -69,6 +69,7 @@ class StderrRelay:
     in a package's ``__main__``) belongs in the error that says it exited, not only on a terminal."""
 
     KEPT = 4096  # bytes of the end kept
+    LINE = 800  # characters of its last line quoted (a subsim's own "cannot reach" line is 300-400: it was cut at 200)
     RECENT = 2.0  # s: what it wrote longer before its end was noticed is not why it ended (a silent os._exit)
 
     def __init__(self, pipe: io.BufferedReader | None) -> None:
@@ -110,12 +111,15 @@ class StderrRelay:
             self._abandoned = True
 
     def last_line(self, timeout: float = 0.5) -> str | None:
-        """The child's last non-blank line on stderr (at most 200 characters) if it wrote it lately; else None."""
+        """The child's last non-blank line on stderr (at most ``LINE`` characters, a cut said) if it wrote it lately;
+        else None."""
         self.finish(timeout)
         if time.monotonic() - self._written > self.RECENT:
             return None
         lines = [x.strip() for x in self._tail.decode(errors="replace").splitlines() if x.strip()]
-        return None if not lines else lines[-1][:200]
+        if not lines:
+            return None
+        return lines[-1] if len(lines[-1]) <= self.LINE else f"{lines[-1][:self.LINE]} [...]"
 
 
 def _stderr_fd() -> int:

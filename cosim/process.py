@@ -88,7 +88,9 @@ def parse_args(model_cls: type[Subsim] | Subsim, argv: Sequence[str] | None,
     p.add_argument("--run", required=True, help="run id (namespaces every key)")
     p.add_argument("--name", default=model_cls.name, help=f"instance name on the bus (default: {model_cls.name})")
     p.add_argument("--connect-timeout", type=_seconds, default=10.0,
-                   help="seconds to wait for the coordinator (a signal during the wait ends the process after it)")
+                   help="seconds to wait for the coordinator's router to answer; an address where nothing listens "
+                        "or that does not resolve is said at once (the coordinator is always up first: it prints "
+                        "this command's secrets); a signal during the wait ends the process after it")
     p.add_argument("--history", type=_count, default=DEFAULT_HISTORY, help="committed states kept for rollback")
     p.add_argument("--lease", type=_seconds, default=10.0, help="seconds a silent link to the coordinator lives")
     p.add_argument("--quiet-start", action="store_true",

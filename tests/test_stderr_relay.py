@@ -70,3 +70,16 @@ def test_without_a_stderr_of_its_own_it_writes_nowhere(capfd, monkeypatch: pytes
     assert relay.last_line() == "into the lock file?"
     assert capfd.readouterr().err == ""
     assert sys.__stderr__ is None
+
+
+
+@pytest.mark.parametrize("over", [False, True])
+def test_a_long_last_line_is_quoted_whole_up_to_its_cap_and_a_cut_is_said(pipe, over: bool) -> None:
+    """A subsim's own 'cannot reach the coordinator ... (something listens there, but its login/TLS refused ours ...)'
+    line was quoted cut at 200 characters, mid-word, with nothing saying so (a multi-host probe)."""
+    relay, write = pipe
+    reach = "orbit: cannot reach the coordinator at tls/10.0.0.1:7447 within 10 s (" + "why " * 80 + "and --tls-ca)"
+    last = "y" * (StderrRelay.LINE + 5) if over else reach
+    os.write(write, b"x" * (StderrRelay.LINE + 1) + b"\n" + last.encode() + b"\n")
+    os.close(write)
+    assert relay.last_line() == ("y" * StderrRelay.LINE + " [...]" if over else reach) and len(reach) > 300
