@@ -29,7 +29,8 @@ def check_run_options(args: argparse.Namespace) -> None:
                         output=args.output)
     if args.inprocess and args.timeout is not None:  # a model hanging in this process waited forever with it given
         raise UsageError("--timeout is for subsim processes: with --inprocess every model runs in this one, which "
-                         "nothing times out (Ctrl-C stops it)")
+                         "nothing times out (Ctrl-C stops a model in Python code; one stuck in native code, an FMU, "
+                         "only kill -9 does)")
 
 
 def check_run_arguments(start: float, stop: Any = None, timeout: Any = None, attach_wait: Any = None,

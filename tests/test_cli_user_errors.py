@@ -222,7 +222,8 @@ def test_a_model_whose_constructor_raises_is_one_line_in_one_process_and_over_ze
     (["--resume", "--overwrite"], "--resume goes on with the results; --overwrite starts them again: give one of them"),
     # a model hanging in one process waited forever with --timeout 5 given (a newcomer probe)
     (["--inprocess", "--timeout", "5"], "--timeout is for subsim processes: with --inprocess every model runs in this "
-                                        "one, which nothing times out (Ctrl-C stops it)"),
+                                        "one, which nothing times out (Ctrl-C stops a model in Python code; one stuck "
+                                        "in native code, an FMU, only kill -9 does)"),
     (["--resume", "--method", "unified"],
      "--resume continues coupled runs (centralized, distributed), not unified ones"),
 ])
