@@ -197,7 +197,8 @@ def _in_variable_unit(value: float, unit: str, name: str, model: _Model, units: 
         raise ScenarioError(f"{where}: parameter {name!r} is given in {unit!r} but FMU variable {name!r} declares "
                             "no unit: give the value in the unit the FMU expects, without a unit attribute")
     try:  # the parameter's unit is defined in its parameter set or the SSD (else the FMU), the variable's in the FMU
-        return convert_value(value, unit, target, [*units, model.defined], [model.defined, *units[1:]])
+        # (else the SSD, else the parameter set: an FMU may name its units without defining them)
+        return convert_value(value, unit, target, [*units, model.defined], [model.defined, *reversed(units)])
     except ValueError as exc:
         raise ScenarioError(f"{where}: parameter {name!r} is given in {unit!r} and FMU variable {name!r} is in "
                             f"{target!r}: cannot convert, {exc}") from None

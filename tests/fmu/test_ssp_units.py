@@ -132,6 +132,17 @@ def test_a_parameter_unit_that_cannot_be_converted_is_one_line_naming_both(
     assert f"component 'a': {phrase}" in str(err.value) and "\n" not in str(err.value)
 
 
+def test_a_variable_unit_the_fmu_only_names_may_be_defined_in_the_parameter_set(
+    tmp_path: Path, fmus: dict[str, Path]
+) -> None:
+    """The built FMU names kg without a BaseUnit: with kg defined beside g in the .ssv's Units, m = 1000 g is 1 kg
+    (it was refused, 'unit kg has no definition', unless kg was defined in the SSD: an FMI probe)."""
+    kg = f'<ssc:Unit xmlns:ssc="{SSC}" name="kg"><ssc:BaseUnit kg="1"/></ssc:Unit>'
+    ssp = write(tmp_path, {"a": fmus["mass2"]}, component("a", '<ssd:ParameterBinding source="resources/a.ssv"/>'),
+                files={"resources/a.ssv": parameters({"m": (1000.0, "g")}, units=kg)})
+    assert params(read_ssp(ssp), "a") == {"m": 1.0}
+
+
 def test_a_parameter_in_the_variables_unit_needs_no_definition(tmp_path: Path, fmus: dict[str, Path]) -> None:
     """The built FMU names kg without defining it: m = 2 kg is 2 kg all the same."""
     ssp = write(tmp_path, {"a": fmus["mass2"]}, component("a", '<ssd:ParameterBinding source="resources/a.ssv"/>'),
