@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import math
 import socket
+import sys
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
@@ -352,14 +353,37 @@ SITE_CERTIFICATE = ("SITE_CERT.pem", "SITE_KEY.pem")
 
 def host_addresses() -> list[str]:
     """This machine's IPv4 address on its route out, found without sending anything and without a name lookup
-    (which can wait seconds for a DNS server); none when it has no route out."""
+    (which can wait seconds for a DNS server); with no route out (a lab network), its interfaces' addresses."""
     try:
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
             s.connect(("192.0.2.1", 9))  # (UDP: connecting picks the route and sends nothing)
             found = s.getsockname()[0]
     except OSError:  # no route out
-        return []
+        return interface_addresses()
     return [] if found.startswith("127.") or found == "0.0.0.0" else [found]
+
+
+SIOCGIFADDR = 0x8915  # Linux's ioctl for an interface's IPv4 address
+
+
+def interface_addresses() -> list[str]:
+    """The IPv4 addresses of this machine's interfaces but loopback (Linux; elsewhere none)."""
+    if not sys.platform.startswith("linux"):
+        return []
+    import fcntl
+    import struct
+
+    found = []
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        for _, interface in socket.if_nameindex():
+            try:
+                packed = fcntl.ioctl(s.fileno(), SIOCGIFADDR, struct.pack("256s", interface[:15].encode()))
+            except OSError:  # no IPv4 address on it
+                continue
+            address = socket.inet_ntoa(packed[20:24])
+            if not address.startswith("127.") and address not in found:
+                found.append(address)
+    return found
 
 
 def attach_endpoint(listen: str | None, endpoint: str) -> tuple[str, str]:

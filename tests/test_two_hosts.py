@@ -318,6 +318,17 @@ def test_a_launched_subsim_lost_in_an_outage_is_started_again_once_the_link_is_b
     assert remote.read_bytes() == local.read_bytes()
 
 
+def test_listening_on_every_address_without_a_route_out_tells_the_subsim_its_one_address(hosts: Hosts) -> None:
+    """--listen tcp/0.0.0.0:7447 on a machine whose only network is a lab's (no default route): the printed command
+    and the cosim-attach line had THIS_MACHINE_ADDRESS, '(none found here)', though the machine has one (a multi-host
+    probe). Its interfaces' addresses are found now."""
+    code = "from cosim.runner import attach_endpoint; print(*attach_endpoint('tcp/0.0.0.0:7447', 'tcp/0.0.0.0:7447'))"
+    done = subprocess.run([*hosts.exec(hosts.a), sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=60, cwd=Path(__file__).resolve().parents[1])
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.startswith(f"tcp/{hosts.addr_a}:7447 {hosts.addr_a} is this machine's address"), done.stdout
+
+
 def test_a_launched_subsim_needs_an_endpoint_its_machine_can_be_told(tmp_path: Path) -> None:
     scenario = tmp_path / "launched.toml"
     scenario.write_text(OSCILLATOR.read_text().replace("[subsims.mass2]\n",
