@@ -342,6 +342,9 @@ def attach_lines(bus: Bus, scenario: Scenario, name: str, listen: str | None, fi
                                             "env": env}) + "\n" if first else ""
     site = (f"\n  (mutual TLS: {SITE_CERTIFICATE[0]} and {SITE_CERTIFICATE[1]} stand for a certificate and key of the "
             "subsim's machine, signed by the CA of --tls-ca; never copy the router's key there)") if mutual else ""
+    if bus.security.tls_ca is not None:  # a path on this machine (a multi-host probe: it is not there elsewhere)
+        site += (f"\n  (--tls-ca {bus.security.tls_ca} is this machine's copy of the CA certificate: from another "
+                 "machine, copy it there and give its path there)")
     return (f"{machine}cosim: external subsim {name!r}: start it with:\n  {shown} {' '.join(cmd)}\n"
             f"  (the two variables are this subsim's secrets: hand them over privately)\n  ({hint}){site}")
 

@@ -121,6 +121,9 @@ def test_an_external_subsims_command_never_hands_out_the_routers_key(certs: dict
     words = shlex.split(command)  # pasted into a shell as it is printed
     assert str(certs["router_key"]) not in text and str(certs["router_pem"]) not in command
     assert words[words.index("--tls-ca") + 1] == str(certs["ca_pem"])
+    # a path on this machine: said so, with what to do from another (a multi-host probe)
+    assert (f"(--tls-ca {certs['ca_pem']} is this machine's copy of the CA certificate: from another machine, copy "
+            "it there and give its path there)") in text
     if mutual:
         assert words[words.index("--tls-cert") + 1:words.index("--tls-key") + 2] == \
             ["SITE_CERT.pem", "--tls-key", "SITE_KEY.pem"]
