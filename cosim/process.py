@@ -255,7 +255,8 @@ def main(model_cls: type[Subsim] | Subsim, argv: Sequence[str] | None = None, pr
             )
             threading.Thread(target=_watch_router, args=(session,), daemon=True, name="router-watch").start()
             if not args.quiet_start:
-                say(f"{args.name}: serving run {args.run} via {args.connect} (pid {os.getpid()})")
+                say(f"{args.name}: serving run {args.run} via {args.connect} as Zenoh id {session.zid()} "
+                    f"(pid {os.getpid()})")  # (the id a coordinator's [duplicate] error names)
             server.serve()
             if not args.quiet_stop:
                 say(f"{args.name}: shutdown requested by the coordinator")

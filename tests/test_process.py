@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import re
 import signal
 import socket
 import subprocess
@@ -235,14 +236,16 @@ def test_spawn_subsim_names_a_target_it_cannot_import(spawn_subsim) -> None:
         spawn_subsim("subsims.no_such")
 
 
-def test_a_second_copy_started_by_hand_is_named_not_taken_for_the_first(cosim_bus: Bus) -> None:
+def test_a_second_copy_started_by_hand_is_named_not_taken_for_the_first(cosim_bus: Bus, tmp_path: Path) -> None:
     """An external subsim started twice with the same command: both hold its key, both answer. The run stopped at
     once with 'not_configured' from the copy (the operator's restart after a blip); the coordinator now believes
     only the process that first answered and names the other."""
     first = cosim_bus.spawn("subsims.integrator", "twin")
     first.handle.configure({})
-    copy = subprocess.Popen(subsim_command("subsims.integrator", cosim_bus.endpoint, cosim_bus.run, "twin"),
-                            env={**os.environ, **cosim_bus.subsim_env("twin")}, stderr=subprocess.DEVNULL)
+    stderr = tmp_path / "copy.err"
+    with stderr.open("w") as sink:
+        copy = subprocess.Popen(subsim_command("subsims.integrator", cosim_bus.endpoint, cosim_bus.run, "twin"),
+                                env={**os.environ, **cosim_bus.subsim_env("twin")}, stderr=sink)
     try:
         t = np.array([0.0, 0.5])
         deadline = time.monotonic() + 60  # the copy starts meanwhile (seconds on a loaded machine)
@@ -250,6 +253,11 @@ def test_a_second_copy_started_by_hand_is_named_not_taken_for_the_first(cosim_bu
             while time.monotonic() < deadline:  # until the copy's reply comes first
                 first.handle.run_interval(t, {"u": np.ones((2, 1))})
         assert err.value.code == "duplicate" and "a second process answers as 'twin'" in str(err.value)
+        # the ids it names are those the two processes said as they started (a multi-host probe: which to stop?)
+        copy_said = stderr.read_text()
+        assert f"twin: serving run {cosim_bus.run} via " in copy_said, copy_said
+        named = re.findall(r"Zenoh id ([0-9a-f]+)", str(err.value))
+        assert len(named) == 2 and f"as Zenoh id {named[0]} (pid {copy.pid})" in copy_said, (named, copy_said)
     finally:
         terminate(copy)
 

@@ -316,9 +316,10 @@ class RemoteHandle(SubsimHandle):
                     raise self._died_error("its process died, and the process now serving its name was started "
                                            "since (it holds none of this run's state)", cmd)
                 elif server != self._server:  # sealed with its key: a second copy of this subsim, started by hand
-                    raise SubsimError("duplicate", f"a second process answers as {self.name!r} (Zenoh id {server}, "
-                                      f"besides {self._server}): it was started twice; stop one of them and run "
-                                      "again (or --resume)", self.name, cmd)
+                    raise SubsimError("duplicate", f"a second process answers as {self.name!r}, Zenoh id {server}, "
+                                      f"besides the one this run uses, Zenoh id {self._server}: it was started "
+                                      "twice; stop the copy (each says its id as it starts: 'serving run ... as "
+                                      "Zenoh id ...')", self.name, cmd)
                 try:
                     result = decode_reply(cmd, body)
                 except VersionMismatch as exc:  # not a malformed reply: another cosim there
