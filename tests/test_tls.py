@@ -103,6 +103,30 @@ def test_cosim_run_with_a_certificate_listens_on_tls_by_default_and_asks_for_the
         in missing.stderr
 
 
+def test_a_ca_or_certificate_that_subsims_would_refuse_is_said_when_the_run_starts(
+    certs: dict[str, Path], tmp_path: Path
+) -> None:
+    """A CA that did not sign the router's certificate, or a certificate for another address than --listen's: the
+    launched subsims gave up after 10 s with a line cut mid-sentence, blaming 'login/TLS' (a multi-host probe)."""
+    other = make_certs(tmp_path / "other", "IP:10.213.7.99")
+    cosim = [sys.executable, "-m", "cosim.cli", "run", str(OSCILLATOR), "--stop", "0.1", "--quiet"]
+    cases = [
+        ([certs["router_pem"], certs["router_key"], other["ca_pem"]], "tls/localhost:0",
+         f"--tls-ca {other['ca_pem']} does not vouch for --tls-cert {certs['router_pem']}: unable to get local "
+         "issuer certificate"),
+        ([other["router_pem"], other["router_key"], other["ca_pem"]], "tls/127.0.0.1:0",
+         f"--tls-cert {other['router_pem']} is not for 127.0.0.1, the address subsims are given: IP address mismatch"),
+        ([certs["router_pem"], other["router_key"], certs["ca_pem"]], "tls/localhost:0",
+         f"--tls-key {other['router_key']} is not the private key of --tls-cert {certs['router_pem']}"),
+    ]
+    for (cert, key, ca), listen, says in cases:
+        done = subprocess.run([*cosim, "--tls-cert", str(cert), "--tls-key", str(key), "--tls-ca", str(ca),
+                               "--listen", listen, "--output", str(tmp_path / "x.csv")],
+                              capture_output=True, text=True, timeout=60)
+        assert done.returncode == 2 and says in done.stderr and len(done.stderr.splitlines()) == 1, done.stderr
+    assert not (tmp_path / "x.csv").exists()
+
+
 @pytest.mark.parametrize("mutual", [False, True], ids=["server-cert", "mutual"])
 def test_an_external_subsims_command_never_hands_out_the_routers_key(certs: dict[str, Path], tmp_path: Path,
                                                                      mutual: bool) -> None:

@@ -162,3 +162,47 @@ class ClientSecurity:
         if (tls_cert is None) != (tls_key is None):
             raise ValueError("a client certificate needs its private key (--tls-cert and --tls-key)")
         return cls(parse_key(text), login, tls_ca, tls_cert, tls_key)
+
+
+def tls_problem(cert: Path, key: Path, ca: Path | None, host: str | None) -> str | None:
+    """Why a subsim given ``ca`` would refuse the router that shows ``cert`` (with ``key``) at ``host``, found by a TLS
+    handshake between two contexts in memory (nothing sent); None when it would not. ``host`` None: no name checked
+    (a router listening on every address is reached at one not known here). Without ``ca``, only the pair is
+    checked. (A wrong CA or a certificate for another address was found only by the subsims, after 10 s, as a
+    login or TLS refusal of any kind.)"""
+    import ssl
+
+    server = ssl.SSLContext(ssl.PROTOCOL_TLS_SERVER)
+    try:
+        server.load_cert_chain(cert, key)
+    except ssl.SSLError as exc:
+        return f"--tls-key {key} is not the private key of --tls-cert {cert}, or one of them is no PEM ({exc.reason})"
+    if ca is None:
+        return None
+    client = ssl.SSLContext(ssl.PROTOCOL_TLS_CLIENT)
+    try:
+        client.load_verify_locations(ca)
+    except ssl.SSLError as exc:
+        return f"--tls-ca {ca}: not a PEM certificate ({exc.reason})"
+    client.check_hostname = host is not None
+    to_server, to_client = ssl.MemoryBIO(), ssl.MemoryBIO()
+    ends = (client.wrap_bio(to_client, to_server, server_hostname=host),
+            server.wrap_bio(to_server, to_client, server_side=True))
+    done = [False, False]
+    for _ in range(8):  # a TLS 1.3 handshake takes 2-3 flights
+        for i, end in enumerate(ends):
+            try:
+                end.do_handshake()
+                done[i] = True
+            except ssl.SSLWantReadError:
+                pass
+            except ssl.SSLCertVerificationError as exc:
+                why = exc.verify_message or str(exc)
+                if "mismatch" in why or "not valid for" in why:
+                    return f"--tls-cert {cert} is not for {host}, the address subsims are given: {why}"
+                return f"--tls-ca {ca} does not vouch for --tls-cert {cert}: {why}"
+            except ssl.SSLError as exc:
+                return f"--tls-cert {cert} and --tls-ca {ca}: a TLS handshake fails ({exc.reason or exc})"
+        if all(done):
+            return None
+    return None

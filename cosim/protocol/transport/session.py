@@ -22,7 +22,7 @@ from typing import Any
 import zenoh
 
 from cosim.protocol.keys import alive_key, coordinator_alive_key, rpc_key
-from cosim.protocol.security import ClientSecurity, Security
+from cosim.protocol.security import ClientSecurity, Security, tls_problem
 
 # The transport's own failure (a session that cannot open, a link refused), for the layers above that report it
 # without importing zenoh themselves.
@@ -186,6 +186,11 @@ def open_router(
         raise ValueError(f"--listen {listen}: with a TLS certificate the endpoint must be tls/<host>:<port>")
     if proto == "tls" and not security.tls:
         raise ValueError(f"--listen {listen}: a tls/ endpoint needs --tls-cert and --tls-key (docs/reliability.md)")
+    if security.tls and security.tls_cert is not None and security.tls_key is not None:
+        named = None if host.strip("[]") in ("0.0.0.0", "::", "") else host.strip("[]")  # (every address: unknown)
+        problem = tls_problem(security.tls_cert, security.tls_key, security.tls_ca, named)
+        if problem is not None:  # said now, not by every subsim after 10 s as a refusal of any kind
+            raise ValueError(problem)
     extra: dict[str, Any] = {
         "adminspace/enabled": security.admin_space,
         "transport/unicast/accept_timeout": ACCEPT_TIMEOUT_MS,
