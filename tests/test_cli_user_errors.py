@@ -280,7 +280,7 @@ def test_a_subsim_or_checker_argument_that_cannot_work_is_refused_at_once(comman
     """An endless --connect-timeout could not be interrupted (zenoh holds the signals while it connects); a bad
     --history or --lease was a traceback; a bad --interval was reported as the subsim's violation."""
     done = subprocess.run([sys.executable, *command], capture_output=True, text=True, timeout=60,
-                          env={**os.environ, "COSIM_SECRET": "00" * 32})
+                          env={**os.environ, "COSIM_SECRET": "00" * 32, "COSIM_ZENOH_AUTH": "site:pw"})
     assert done.returncode == 2 and words in done.stderr.strip().splitlines()[-1], done.stderr
     assert "Traceback" not in done.stderr
 

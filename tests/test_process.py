@@ -107,7 +107,7 @@ def test_unreachable_endpoint_exits_with_a_clear_message_at_once(host: str, says
     every cause."""
     port = _unused_port()
     cmd = subsim_command("subsims.integrator", f"tcp/{host}:{port}", "run-x", "lonely")
-    env = {**os.environ, "COSIM_SECRET": "00" * 32}
+    env = {**os.environ, "COSIM_SECRET": "00" * 32, "COSIM_ZENOH_AUTH": "site:pw"}
     started = time.monotonic()
     done = subprocess.run([*cmd, "--connect-timeout", "20"], capture_output=True, text=True, timeout=30, env=env)
     assert done.returncode == 2 and time.monotonic() - started < 10
@@ -120,7 +120,7 @@ def test_a_private_bus_that_is_gone_is_said_at_once(tmp_path: Path) -> None:
     stale = tmp_path / "router.sock"
     with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as s:
         s.bind(str(stale))  # a socket file no one listens on any more
-    env = {**os.environ, "COSIM_SECRET": "00" * 32}
+    env = {**os.environ, "COSIM_SECRET": "00" * 32, "COSIM_ZENOH_AUTH": "site:pw"}
     for path in (tmp_path / "gone.sock", stale):
         endpoint = f"unixsock-stream/{path}"
         started = time.monotonic()
@@ -297,10 +297,21 @@ def test_a_tls_file_that_is_not_there_is_named_at_start(tmp_path: Path) -> None:
     cmd = subsim_command("subsims.integrator", "tls/127.0.0.1:7447", "run-x", "lonely",
                          tls_ca=Path("certs/ca.pem"))
     done = subprocess.run(cmd, capture_output=True, text=True, timeout=30, cwd=tmp_path,
-                          env={**os.environ, "COSIM_SECRET": "00" * 32})
+                          env={**os.environ, "COSIM_SECRET": "00" * 32, "COSIM_ZENOH_AUTH": "site:pw"})
     assert done.returncode == 2 and f"--tls-ca certs/ca.pem: no such file (in {tmp_path})" in done.stderr
     # that line alone, not after argparse's usage text (a multi-host probe: 15 lines above the one that matters)
     assert done.stderr.count("\n") == 1 and done.stderr.startswith("python -m subsims.integrator: error: "), done.stderr
+
+
+def test_a_subsim_without_its_login_is_refused_at_once_naming_the_variable(tmp_path: Path) -> None:
+    """Started with COSIM_SECRET but without COSIM_ZENOH_AUTH (the second of the two printed variables): every run's
+    router asks for a login, and the link was refused after --connect-timeout as 'login/TLS refused' (a multi-host
+    probe)."""
+    cmd = subsim_command("subsims.integrator", "tcp/127.0.0.1:9", "run-x", "lonely")
+    env = {k: v for k, v in os.environ.items() if k != "COSIM_ZENOH_AUTH"}
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=30, env={**env, "COSIM_SECRET": "00" * 32})
+    assert done.returncode == 2 and done.stderr.count("\n") == 1, done.stderr
+    assert "COSIM_ZENOH_AUTH is not set: start the subsim with the two variables cosim printed for it" in done.stderr
 
 
 def test_a_death_is_put_down_to_a_pause_of_the_coordinator_only_when_that_explains_it(
@@ -386,7 +397,7 @@ def test_a_subsim_process_on_an_old_eclipse_zenoh_exits_with_that_line_before_se
              "from cosim.serve import main; sys.exit(main(sys.argv[1:]))\n")
     done = subprocess.run([sys.executable, "-c", older, "subsims.oscillator.subsim:Mass", "--connect",
                            "tcp/127.0.0.1:9", "--run", "r1", "--name", "m"], capture_output=True, text=True, timeout=60,
-                          env={**os.environ, "COSIM_SECRET": "00" * 32})
+                          env={**os.environ, "COSIM_SECRET": "00" * 32, "COSIM_ZENOH_AUTH": "site:pw"})
     assert done.returncode == 2
     assert done.stderr == "m: cosim needs eclipse-zenoh >= 1.10, < 2 and this Python has 1.0.4: pip install " \
                           "'eclipse-zenoh>=1.10,<2'\n", done.stderr

@@ -159,6 +159,10 @@ class ClientSecurity:
         login = read_login(auth_file) if auth_file else None
         if login is None and env.get(ZENOH_AUTH_ENV):
             login = parse_login(env[ZENOH_AUTH_ENV], ZENOH_AUTH_ENV)
+        if login is None:  # every run's router asks for one: without it the link was refused after 10 s, unnamed
+            raise ValueError(f"{ZENOH_AUTH_ENV} is not set: start the subsim with the two variables cosim printed for "
+                             f"it ({SECRET_ENV}=<hex> {ZENOH_AUTH_ENV}=<login> python -m ...), or a login of "
+                             "--auth-file")
         if (tls_cert is None) != (tls_key is None):
             raise ValueError("a client certificate needs its private key (--tls-cert and --tls-key)")
         return cls(parse_key(text), login, tls_ca, tls_cert, tls_key)
