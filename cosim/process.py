@@ -168,6 +168,67 @@ def unreachable(endpoint: str, timeout: float) -> tuple[str | None, bool]:
         return f"{host}:{port} cannot be reached ({exc.strerror or exc})", False
 
 
+def tls_cause(endpoint: str, security: ClientSecurity, timeout: float = 3.0) -> str:
+    """Why a router that is there refused this subsim's link, found by a TLS handshake of our own (Python's ssl, as
+    near as it comes to Zenoh's): the router's certificate against --tls-ca, a client certificate it asks for or
+    refuses, TLS where tcp/ was given; else its login."""
+    import ssl
+
+    proto = endpoint.partition("/")[0]
+    try:
+        host, port = split_endpoint(endpoint.partition("#")[0])
+    except ValueError:
+        return _LOGIN_REFUSED
+    host = host.strip("[]")
+    context = ssl.SSLContext(ssl.PROTOCOL_TLS_CLIENT)
+    if proto == "tcp":  # does it speak TLS there? (then tcp/ cannot work)
+        context.check_hostname, context.verify_mode = False, ssl.CERT_NONE
+    elif security.tls_ca is not None:
+        context.load_verify_locations(security.tls_ca)
+    else:
+        context.load_default_certs()
+    if security.tls_cert is not None and security.tls_key is not None:
+        context.load_cert_chain(security.tls_cert, security.tls_key)
+    try:
+        with socket.create_connection((host, port), timeout=timeout) as raw, \
+                context.wrap_socket(raw, server_hostname=host) as tls:
+            if proto == "tcp":
+                return f"it speaks TLS there: connect with tls/{host}:{port} and --tls-ca (the coordinator's CA)"
+            tls.settimeout(0.5)  # TLS 1.3: a client certificate it asks for and does not take is refused after
+            try:
+                tls.recv(1)
+            except (TimeoutError, ssl.SSLWantReadError):
+                pass
+    except ssl.SSLCertVerificationError as exc:
+        why = exc.verify_message or str(exc)
+        if "mismatch" in why or "not valid for" in why:
+            return f"its certificate is not for {host}, the address this subsim was given ({why}): use the name or " \
+                   "address the coordinator printed"
+        if security.tls_ca is None:
+            return f"its certificate is not signed by a CA this machine trusts ({why}): give --tls-ca, the CA " \
+                   "certificate of the coordinator's machine"
+        return f"its certificate is not signed by --tls-ca {security.tls_ca} ({why}): get the CA certificate from " \
+               "the coordinator's machine"
+    except ssl.SSLError as exc:
+        reason = (exc.reason or str(exc)).lower().replace("_", " ")
+        if "wrong version" in reason or "record" in reason or "eof" in reason:  # no TLS there
+            return _LOGIN_REFUSED if proto == "tcp" else f"it does not speak TLS there: connect with tcp/{host}:{port}"
+        if security.tls_cert is None and ("certificate required" in reason or "handshake failure" in reason):
+            return "it asks for a client certificate (mutual TLS): give --tls-cert and --tls-key, this machine's " \
+                   "certificate signed by the coordinator's CA"
+        if security.tls_cert is not None and "alert" in reason:  # (rustls: decrypt error, bad or unknown ca)
+            return f"it refused this subsim's certificate, --tls-cert {security.tls_cert} ({exc.reason}): it must " \
+                   "be signed by the CA the coordinator was given (its --tls-ca)"
+        return f"the TLS handshake failed ({exc.reason or exc}): check tls/ against tcp/ and --tls-ca"
+    except OSError:
+        return _LOGIN_REFUSED if proto == "tcp" else "something listens there, but not TLS: tls/ against tcp/?"
+    return _LOGIN_REFUSED
+
+
+_LOGIN_REFUSED = (f"it refused our login: ${ZENOH_AUTH_ENV} (or --auth-file) must be the one the coordinator printed "
+                  "for this run and name, or it is not a cosim router")
+
+
 def _check_login_names(login: tuple[str, str] | None, run: str, name: str) -> None:
     """A run's own logins are ``cosim-<run>`` and ``cosim-<run>.<name>``: one made for another run or subsim would
     connect and then be refused its keys in silence (the router's access control), so say it here."""
@@ -231,8 +292,7 @@ def main(model_cls: type[Subsim] | Subsim, argv: Sequence[str] | None = None, pr
             session = zenoh.open(client_config(args.connect, args.connect_timeout, int(args.lease * 1000),
                                               security=args.security))
         except zenoh.ZError as exc:
-            cause = ("something listens there, but its login/TLS refused ours, or it is not a cosim router: check "
-                     f"${ZENOH_AUTH_ENV}/--auth-file, tls/ against tcp/ and --tls-ca" if connected else
+            cause = (tls_cause(args.connect, args.security) if connected else
                      "no answer from that address: a firewall, no route, or the wrong address?")
             gone = unreachable(args.connect, 0.5)[0] if connected else None
             if gone is not None:  # it was there a moment ago: its coordinator stopped (or was killed) meanwhile

@@ -13,7 +13,7 @@ import zenoh
 from certs import make_certs
 
 from cosim.launch import Bus
-from cosim.protocol.security import ClientSecurity, Security, zenoh_login
+from cosim.protocol.security import ZENOH_AUTH_ENV, ClientSecurity, Security, zenoh_login
 from cosim.protocol.transport.session import client_config
 
 pytestmark = [pytest.mark.slow]  # the inner loop: pytest -m "not slow"
@@ -125,6 +125,43 @@ def test_a_ca_or_certificate_that_subsims_would_refuse_is_said_when_the_run_star
                               capture_output=True, text=True, timeout=60)
         assert done.returncode == 2 and says in done.stderr and len(done.stderr.splitlines()) == 1, done.stderr
     assert not (tmp_path / "x.csv").exists()
+
+
+@pytest.mark.parametrize("mutual", [False, True], ids=["server-cert", "mutual"])
+def test_a_subsim_the_router_refuses_says_why(certs: dict[str, Path], tmp_path: Path, mutual: bool) -> None:
+    """A wrong --tls-ca, none, tcp/ for a TLS router, tls/ for a plain one, no client certificate or one of another CA
+    under mutual TLS, a wrong login: each said the same 'something listens there, but its login/TLS refused ours ...:
+    check $COSIM_ZENOH_AUTH/--auth-file, tls/ against tcp/ and --tls-ca' after 10 s (a multi-host probe)."""
+    other = make_certs(tmp_path / "other")
+    ca, wrong_ca = ["--tls-ca", str(certs["ca_pem"])], ["--tls-ca", str(other["ca_pem"])]
+    mine = ["--tls-cert", str(certs["subsim_pem"]), "--tls-key", str(certs["subsim_key"])] if mutual else []
+    cases = [([*wrong_ca, *mine], None, f"its certificate is not signed by --tls-ca {other['ca_pem']} (unable to get "
+              "local issuer certificate): get the CA certificate from the coordinator's machine"),
+             (mine, None, "its certificate is not signed by a CA this machine trusts"),
+             ([*ca, *mine], "tcp", "it speaks TLS there: connect with tls/localhost:"),
+             ([*ca, *mine], "login", "it refused our login: $COSIM_ZENOH_AUTH (or --auth-file) must be the one")]
+    if mutual:
+        cases += [(ca, None, "it asks for a client certificate (mutual TLS): give --tls-cert and --tls-key"),
+                  ([*ca, "--tls-cert", str(other["subsim_pem"]), "--tls-key", str(other["subsim_key"])], None,
+                   f"it refused this subsim's certificate, --tls-cert {other['subsim_pem']} (")]
+    with tls_bus(certs, mutual, names=["x"]) as bus:
+        port = bus.endpoint.rsplit(":", 1)[1]
+        for options, change, says in cases:
+            env = {**os.environ, **bus.subsim_env("x")}
+            if change == "login":
+                env[ZENOH_AUTH_ENV] = "site:not-a-login"
+            endpoint = f"tcp/localhost:{port}" if change == "tcp" else bus.endpoint
+            done = subprocess.run([sys.executable, "-m", "subsims.integrator", "--connect", endpoint, "--run", bus.run,
+                                   "--name", "x", "--connect-timeout", "2", *options], env=env, capture_output=True,
+                                  text=True, timeout=60)
+            assert done.returncode == 2 and says in done.stderr, (options, change, done.stderr)
+    with Bus.open(names=["x"], listen="tcp/127.0.0.1:0") as bus:  # a plain router, and tls/ given
+        port = bus.endpoint.rsplit(":", 1)[1]
+        done = subprocess.run([sys.executable, "-m", "subsims.integrator", "--connect", f"tls/127.0.0.1:{port}",
+                               "--run", bus.run, "--name", "x", "--connect-timeout", "2", *ca],
+                              env={**os.environ, **bus.subsim_env("x")}, capture_output=True, text=True, timeout=60)
+        assert done.returncode == 2 and f"it does not speak TLS there: connect with tcp/127.0.0.1:{port}" in \
+            done.stderr, done.stderr
 
 
 @pytest.mark.parametrize("mutual", [False, True], ids=["server-cert", "mutual"])
