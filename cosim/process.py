@@ -180,18 +180,26 @@ def tls_cause(endpoint: str, security: ClientSecurity, timeout: float = 3.0) -> 
     except ValueError:
         return _LOGIN_REFUSED
     host = host.strip("[]")
-    context = ssl.SSLContext(ssl.PROTOCOL_TLS_CLIENT)
-    if proto == "tcp":  # does it speak TLS there? (then tcp/ cannot work)
-        context.check_hostname, context.verify_mode = False, ssl.CERT_NONE
-    elif security.tls_ca is not None:
-        context.load_verify_locations(security.tls_ca)
-    else:
-        context.load_default_certs()
-    if security.tls_cert is not None and security.tls_key is not None:
-        context.load_cert_chain(security.tls_cert, security.tls_key)
+    if proto not in ("tcp", "tls"):
+        return _LOGIN_REFUSED
     try:
-        with socket.create_connection((host, port), timeout=timeout) as raw, \
-                context.wrap_socket(raw, server_hostname=host) as tls:
+        context = ssl.SSLContext(ssl.PROTOCOL_TLS_CLIENT)
+        if proto == "tcp":  # does it speak TLS there? (then tcp/ cannot work)
+            context.check_hostname, context.verify_mode = False, ssl.CERT_NONE
+        elif security.tls_ca is not None:
+            context.load_verify_locations(security.tls_ca)
+        else:
+            context.load_default_certs()
+        if security.tls_cert is not None and security.tls_key is not None:
+            context.load_cert_chain(security.tls_cert, security.tls_key)
+    except (ssl.SSLError, OSError) as exc:  # Zenoh took the files; say what Python's ssl makes of them
+        return f"its login or TLS refused ours; --tls-ca, --tls-cert or --tls-key cannot be read as PEM ({exc})"
+    try:
+        raw = socket.create_connection((host, port), timeout=timeout)
+    except OSError:  # gone meanwhile: the caller says so
+        return _LOGIN_REFUSED
+    try:
+        with raw, context.wrap_socket(raw, server_hostname=host) as tls:
             if proto == "tcp":
                 return f"it speaks TLS there: connect with tls/{host}:{port} and --tls-ca (the coordinator's CA)"
             tls.settimeout(0.5)  # TLS 1.3: a client certificate it asks for and does not take is refused after
@@ -220,8 +228,8 @@ def tls_cause(endpoint: str, security: ClientSecurity, timeout: float = 3.0) -> 
             return f"it refused this subsim's certificate, --tls-cert {security.tls_cert} ({exc.reason}): it must " \
                    "be signed by the CA the coordinator was given (its --tls-ca)"
         return f"the TLS handshake failed ({exc.reason or exc}): check tls/ against tcp/ and --tls-ca"
-    except OSError:
-        return _LOGIN_REFUSED if proto == "tcp" else "something listens there, but not TLS: tls/ against tcp/?"
+    except OSError:  # the connection closed or reset at our TLS hello
+        return _LOGIN_REFUSED if proto == "tcp" else f"it does not speak TLS there: connect with tcp/{host}:{port}"
     return _LOGIN_REFUSED
 
 
