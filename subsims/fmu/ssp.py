@@ -65,6 +65,13 @@ def expand_fmu(spec: Mapping[str, Any], scenario: Path, start: float, key: str) 
         if not table.get("external", False) and not resolved.is_file():  # launched here: a typo, found at load
             what = "a directory, not an .fmu file" if resolved.is_dir() else "no such file"
             raise ScenarioError(f"{scenario}: [{key}.fmu] {what}: {resolved}")
+        if not table.get("external", False):  # a broken file is its fmu = line's fault, said at load (it came as
+            from subsims.fmu.fmu import FmuError, read_fmu  # "[...params] configure: bad parameter": an FMI probe)
+
+            try:
+                read_fmu(resolved)
+            except FmuError as exc:
+                raise ScenarioError(f"{scenario}: [{key}.fmu] {exc}") from None
         params = {**params, "fmu": str(resolved)}
     if start != 0.0:
         params.setdefault("start_time", start)

@@ -186,7 +186,8 @@ def test_a_bad_ssp_is_one_clear_line(
     assert capsys.readouterr().err == f"cosim: {err.value}\n"
 
 
-def test_fmu_shorthand_resolves_against_the_scenario_and_refuses_model_too(tmp_path: Path) -> None:
+def test_fmu_shorthand_resolves_against_the_scenario_and_refuses_model_too(tmp_path: Path,
+                                                                         fmus: dict[str, Path]) -> None:
     (tmp_path / "sub").mkdir()
     path = tmp_path / "sub" / "s.toml"
     path.write_text('start = 2.0\nstop = 3.0\n[coupling]\ninterval = 0.5\n[subsims.a]\nfmu = "../m.fmu"\n'
@@ -194,7 +195,11 @@ def test_fmu_shorthand_resolves_against_the_scenario_and_refuses_model_too(tmp_p
     with pytest.raises(ScenarioError) as err:  # launched on this machine: the file must be there
         load(path)
     assert str(err.value) == f"{path}: [subsims.a.fmu] no such file: {tmp_path / 'm.fmu'}"
-    (tmp_path / "m.fmu").write_bytes(b"")
+    (tmp_path / "m.fmu").write_bytes(b"")  # a broken FMU is its fmu = line's fault, said at load (was: params)
+    with pytest.raises(ScenarioError) as err:
+        load(path)
+    assert str(err.value) == f"{path}: [subsims.a.fmu] {tmp_path / 'm.fmu'}: not an FMU (not a zip archive)"
+    shutil.copy(fmus["mass2"], tmp_path / "m.fmu")
     spec = load(path).subsims["a"]
     assert spec.model == "subsims.fmu:FmuSubsim"
     assert spec.params == {"k": 1.0, "fmu": str(tmp_path / "m.fmu"), "start_time": 2.0}
