@@ -1,12 +1,12 @@
 """Run a subsim model as its own process: ``python -m subsims.<name> --connect EP --run RUN``.
 
-The environment must hold the subsim's key (``COSIM_SECRET``) and, for a router that asks for a login,
-``COSIM_ZENOH_AUTH`` (or ``--auth-file``); ``cosim run`` sets both for the subsims it launches and
-prints them for external ones. Secrets never go on the command line, which ``ps`` shows.
+The environment must hold the subsim's key (``COSIM_SECRET``) and its router login, ``COSIM_ZENOH_AUTH`` (or
+``--auth-file``); ``cosim run`` sets both for the subsims it launches and prints them for external ones. Secrets
+never go on the command line, which ``ps`` shows.
 
-Exit codes: 0 after ``shutdown``, SIGTERM, SIGINT or loss of the coordinator (its liveliness
-token is deleted, or its router is unreachable for 2 s); 2 when the
-coordinator cannot be reached in time or the arguments are bad. Every path closes the Zenoh
+Exit codes: 0 after ``shutdown``, SIGTERM, SIGINT or the coordinator's leaving (its liveliness token deleted); 3 when
+its router has been unreachable for 2 s (a cut link, or the coordinator killed: a supervisor may start it again); 2
+when the coordinator cannot be reached in time or the arguments are bad. Every path closes the Zenoh
 session (an open session keeps the process alive forever).
 """
 

@@ -117,18 +117,20 @@ class Session:
         :data:`RETRY_ELSEWHERE` seconds for up to ``external_wait``, as an external subsim is waited for: one
         replacement, not one restart per try."""
         assert self.bus is not None
-        give_up, told = time.monotonic() + self.external_wait, False
+        started, tries = time.monotonic(), 0
         while True:
             try:
                 return self.bus.respawn(name, timeout=self.timeout).handle
             except SubsimError as exc:
                 if exc.command not in ("spawn", "connect"):
                     raise
-                if time.monotonic() + RETRY_ELSEWHERE > give_up:  # tried for as long as an external one is waited for
-                    raise Abandoned(exc.code, f"{exc.message} (tried again for {self.external_wait:g} s, "
+                tries += 1
+                if time.monotonic() + RETRY_ELSEWHERE > started + self.external_wait:
+                    if tries == 1:  # a wait shorter than one retry: one failed replacement, as any (restarts left)
+                        raise
+                    raise Abandoned(exc.code, f"{exc.message} ({tries} tries in {time.monotonic() - started:.0f} s, "
                                     "--attach-wait)", name, exc.command) from None
-                if not told:
-                    told = True
+                if tries == 1:
                     self.log(f"cosim: {name} could not be started again over there ({exc.message}); trying again "
                              f"every {RETRY_ELSEWHERE:g} s for up to {self.external_wait:g} s (--attach-wait)")
                 time.sleep(RETRY_ELSEWHERE)

@@ -117,7 +117,7 @@ def test_a_ca_or_certificate_that_subsims_would_refuse_is_said_when_the_run_star
         ([other["router_pem"], other["router_key"], other["ca_pem"]], "tls/127.0.0.1:0",
          f"--tls-cert {other['router_pem']} is not for 127.0.0.1, the address subsims are given: IP address mismatch"),
         ([certs["router_pem"], other["router_key"], certs["ca_pem"]], "tls/localhost:0",
-         f"--tls-key {other['router_key']} is not the private key of --tls-cert {certs['router_pem']}"),
+         f"--tls-key {other['router_key']} is not the unencrypted private key of --tls-cert {certs['router_pem']}"),
     ]
     for (cert, key, ca), listen, says in cases:
         done = subprocess.run([*cosim, "--tls-cert", str(cert), "--tls-key", str(key), "--tls-ca", str(ca),
@@ -125,6 +125,35 @@ def test_a_ca_or_certificate_that_subsims_would_refuse_is_said_when_the_run_star
                               capture_output=True, text=True, timeout=60)
         assert done.returncode == 2 and says in done.stderr and len(done.stderr.splitlines()) == 1, done.stderr
     assert not (tmp_path / "x.csv").exists()
+
+
+def test_the_start_check_passes_what_zenoh_takes_and_never_prompts(certs: dict[str, Path], tmp_path: Path) -> None:
+    """The check at start is Python's ssl, stricter than Zenoh's rustls: an intermediate CA given as --tls-ca (rustls
+    takes any certificate of it as an anchor) was refused, though the run had worked; an encrypted key made OpenSSL
+    ask for a pass phrase on the terminal, or raised OSError (red team)."""
+    from certs import _openssl
+
+    from cosim.protocol.security import tls_problem
+
+    d = tmp_path / "chain"
+    d.mkdir()
+    (d / "int.ext").write_text("basicConstraints=critical,CA:TRUE\nkeyUsage=critical,keyCertSign,cRLSign\n")
+    (d / "leaf.ext").write_text("subjectAltName=IP:127.0.0.1\nextendedKeyUsage=serverAuth\n")
+    for who, signer, signer_key in (("int", certs["ca_pem"], certs["ca_pem"].with_name("ca.key")),
+                                    ("leaf", d / "int.pem", d / "int.key")):
+        _openssl("req", "-newkey", "ec", "-pkeyopt", "ec_paramgen_curve:prime256v1", "-nodes", "-keyout",
+                 f"{who}.key", "-out", f"{who}.csr", "-subj", f"/CN={who}", cwd=d)
+        _openssl("x509", "-req", "-in", f"{who}.csr", "-CA", str(signer), "-CAkey", str(signer_key), "-CAcreateserial",
+                 "-out", f"{who}.pem", "-days", "2", "-extfile", f"{who}.ext", cwd=d)
+    assert tls_problem(d / "leaf.pem", d / "leaf.key", d / "int.pem", "127.0.0.1") is None  # the intermediate
+    assert "does not vouch" in str(tls_problem(d / "leaf.pem", d / "leaf.key", certs["ca_pem"], "127.0.0.1"))
+    _openssl("pkey", "-in", "leaf.key", "-aes256", "-passout", "pass:secret", "-out", "leaf_enc.key", cwd=d)
+    done = subprocess.run([sys.executable, "-c", "import sys; from pathlib import Path; from cosim.protocol.security "
+                           "import tls_problem; print(tls_problem(*map(Path, sys.argv[1:4]), '127.0.0.1'))",
+                           str(d / "leaf.pem"), str(d / "leaf_enc.key"), str(d / "int.pem")],
+                          stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=30)
+    assert done.returncode == 0 and done.stdout.startswith(
+        f"--tls-key {d / 'leaf_enc.key'} is not the unencrypted private key of --tls-cert"), done.stdout + done.stderr
 
 
 @pytest.mark.parametrize("mutual", [False, True], ids=["server-cert", "mutual"])
