@@ -188,10 +188,11 @@ def tls_cause(endpoint: str, security: ClientSecurity, timeout: float = 3.0) -> 
             context.check_hostname, context.verify_mode = False, ssl.CERT_NONE
         elif security.tls_ca is not None:
             context.load_verify_locations(security.tls_ca)
+            context.verify_flags |= ssl.VERIFY_X509_PARTIAL_CHAIN  # any certificate of it an anchor, as for rustls
         else:
             context.load_default_certs()
-        if security.tls_cert is not None and security.tls_key is not None:
-            context.load_cert_chain(security.tls_cert, security.tls_key)
+        if security.tls_cert is not None and security.tls_key is not None:  # (never ask for a pass phrase)
+            context.load_cert_chain(security.tls_cert, security.tls_key, password=lambda: b"")
     except (ssl.SSLError, OSError) as exc:  # Zenoh took the files; say what Python's ssl makes of them
         return f"its login or TLS refused ours; --tls-ca, --tls-cert or --tls-key cannot be read as PEM ({exc})"
     try:
