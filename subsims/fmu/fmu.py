@@ -98,6 +98,7 @@ class FmuInfo:
     n_event_indicators: int
     unused: dict[str, str]  # name -> why cosim neither couples nor sets it (arrays, outputs not real, ...)
     fixed_step: bool = False  # co-simulation cannot handle a variable communication step size
+    float32_states: tuple[str, ...] = ()  # continuous states (or their derivatives) of FMI 3 type Float32
 
     @property
     def major(self) -> int:
@@ -246,6 +247,9 @@ def read_fmu(path: str | os.PathLike) -> FmuInfo:
         n_event_indicators=int(md.numberOfEventIndicators or 0),
         unused={v.name: why for v in md.modelVariables if (why := _unused(v))},
         fixed_step="cs" in identifiers and not md.coSimulation.canHandleVariableCommunicationStepSize,
+        float32_states=tuple(d.variable.derivative.name if d.variable.derivative is not None else d.variable.name
+                             for d in md.derivatives if "Float32" in (d.variable.type, getattr(
+                                 d.variable.derivative, "type", None))),
     )
 
 
