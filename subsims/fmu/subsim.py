@@ -257,7 +257,9 @@ class FmuSubsim(Subsim):
         outputs = sorted(k for k in unknown if k in {v.name for v in info.outputs})
         if outputs:
             what = "is an output" if len(outputs) == 1 else "are outputs"
-            raise ValueError(f"{outputs} in {info.path.name} {what}, which the FMU computes: not a parameter; "
+            rest = [k for k in unknown if k not in outputs]
+            also = f"; unknown too: {rest}" if rest else ""
+            raise ValueError(f"{outputs} in {info.path.name} {what}, which the FMU computes: not a parameter{also}; "
                              f"settable: {', '.join(sorted(info.settable)) or 'none'}")
         if unknown:
             known = ", ".join(sorted(info.settable)) or "none"

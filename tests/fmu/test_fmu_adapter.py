@@ -71,6 +71,8 @@ def test_ports_and_metadata_come_from_the_model_description(fmus: dict[str, Path
         ({"v_0": 1.0, "kk": 2.0}, "unknown FMU variable(s) ['kk', 'v_0'] in mass2.fmu (did you mean 'k' for 'kk', "
                                   "'v0' for 'v_0'?)"),
         ({"u": 1.0}, "['u'] in mass2.fmu is an output, which the FMU computes: not a parameter; settable: k, m, "),
+        ({"u": 1.0, "zz": 2}, "['u'] in mass2.fmu is an output, which the FMU computes: not a parameter; unknown too: "
+                              "['zz']; settable: k, m, "),
         ({"F": 1.0}, "['F'] in mass2.fmu is a real input: a port, fed by a coupling or held constant in the "
                      "scenario's [subsims.<name>.inputs] (F = [value]), not a parameter"),
         ({"m": "heavy"}, "m is Real: needs a finite number, got 'heavy'"),
