@@ -134,6 +134,9 @@ def _run_until_done(args: argparse.Namespace, state: dict) -> int:
         report = run_unified(scenario, stop=args.stop, output=output, overwrite=args.overwrite, on_interval=committed)
     else:
         security = _security(args, scenario.security)
+        if args.inprocess and scenario.run.timeout is not None:  # (the file serves both ways: said, not refused)
+            say(f"cosim: [run] timeout = {scenario.run.timeout:g} s is for subsim processes: with --inprocess nothing "
+                "times out a model (Ctrl-C stops one in Python code)")
         if not args.inprocess:
             if args.listen is not None:
                 check_listen(args.listen)

@@ -236,6 +236,18 @@ def test_a_bad_option_value_is_refused_naming_the_option(tmp_path: Path, args: l
     assert not (tmp_path / "results").exists()  # refused before anything ran
 
 
+def test_a_scenario_timeout_that_cannot_apply_in_one_process_is_said(tmp_path: Path) -> None:
+    """[run] timeout in the file was ignored without a word with --inprocess (the flag is refused; the file serves both
+    ways, so it is said, not refused)."""
+    scenario = tmp_path / "s.toml"
+    scenario.write_text(OSCILLATOR.read_text() + "\n[run]\ntimeout = 30\n")
+    done = subprocess.run([*COSIM, "run", str(scenario), "--quiet", "--inprocess", "--stop", "0.05"],
+                          capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert done.stderr.splitlines()[0] == ("cosim: [run] timeout = 30 s is for subsim processes: with --inprocess "
+                                           "nothing times out a model (Ctrl-C stops one in Python code)"), done.stderr
+
+
 @pytest.mark.parametrize("command", ["run", "describe", "plot"])
 def test_a_misspelled_option_shows_the_usage_of_its_own_command(tmp_path: Path, command: str) -> None:
     """Not the top-level ``cosim`` usage, which lists none of the command's options."""
