@@ -348,7 +348,8 @@ def attach_lines(bus: Bus, scenario: Scenario, name: str, listen: str | None, fi
         site += (f"\n  (--tls-ca {bus.security.tls_ca} is this machine's copy of the CA certificate: from another "
                  "machine, copy it there and give its path there)")
     return (f"{machine}cosim: external subsim {name!r}: start it with:\n  {shown} {' '.join(cmd)}\n"
-            f"  (the two variables are this subsim's secrets: hand them over privately)\n  ({hint}){site}")
+            "  (the two variables are this subsim's secrets: hand them over privately; they are new at every start, "
+            f"--resume included)\n  ({hint}){site}")
 
 
 PLACEHOLDER_MODULE = "YOUR_SUBSIM_MODULE"  # (placeholders a shell passes on as they are: no <, >, ' or spaces)
