@@ -161,7 +161,7 @@ def test_a_subsim_replaced_after_intervals_where_it_was_not_run_again_replays_to
 
     def run(die_at: int) -> tuple[list[bytes], list[Restart], int]:
         handles = {name: handle(name, die_at if name == "src" else 0) for name in y0}
-        recovery = Recovery(lambda name: handle(name), restarts=1, checkpoint_every=3, log=lambda s: None)
+        recovery = Recovery(lambda name, why: handle(name), restarts=1, checkpoint_every=3, log=lambda s: None)
         coordinator = Coordinator(handles, couplings, settings, recovery=recovery)
         intervals: list = []
         coordinator.run(0.0, 8 * settings.interval, intervals.append)
