@@ -101,7 +101,7 @@ class Deadline:
 
 @dataclass
 class Recovery:
-    """Replace subsims that die or hang: ``revive(name)`` gives a new one in the state the run starts from
+    """Replace subsims that die or hang: ``revive(name, why)`` gives a new one in the state the run starts from
     (configured; a subsim lost before the first checkpoint is taken as it is); at most ``restarts``
     replacements in a run; a checkpoint of every subsim's committed state each ``checkpoint_every`` intervals."""
 
