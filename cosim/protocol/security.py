@@ -19,6 +19,10 @@ import os
 import secrets
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    import ssl
 
 SECRET_ENV = "COSIM_SECRET"  # hex key of one subsim (64 hex digits)
 ZENOH_AUTH_ENV = "COSIM_ZENOH_AUTH"  # "user:password" of the router's login
@@ -173,6 +177,17 @@ NO_ISSUER = (2, 20)  # X509_V_ERR_UNABLE_TO_GET_ISSUER_CERT(_LOCALLY)
 NAME_MISMATCH = (62, 64)  # X509_V_ERR_HOSTNAME_MISMATCH, X509_V_ERR_IP_ADDRESS_MISMATCH
 
 
+def verifying_context(ca: Path) -> ssl.SSLContext:
+    """A client's TLS context that trusts ``ca`` as Zenoh's rustls does: any certificate of it is an anchor (an
+    intermediate too). Raises ``ssl.SSLError`` for a file that holds no PEM certificate."""
+    import ssl
+
+    context = ssl.SSLContext(ssl.PROTOCOL_TLS_CLIENT)
+    context.load_verify_locations(ca)
+    context.verify_flags |= ssl.VERIFY_X509_PARTIAL_CHAIN
+    return context
+
+
 def tls_problem(cert: Path, key: Path, ca: Path | None, host: str | None) -> str | None:
     """Why a subsim given ``ca`` would refuse the router that shows ``cert`` (with ``key``) at ``host``, found by a TLS
     handshake between two contexts in memory (nothing sent); None when it would not. ``host`` None: no name checked
@@ -189,13 +204,11 @@ def tls_problem(cert: Path, key: Path, ca: Path | None, host: str | None) -> str
                 f"({getattr(exc, 'reason', None) or exc})")
     if ca is None:
         return None
-    client = ssl.SSLContext(ssl.PROTOCOL_TLS_CLIENT)
     try:
-        client.load_verify_locations(ca)
+        client = verifying_context(ca)
     except ssl.SSLError as exc:
         return f"--tls-ca {ca}: not a PEM certificate ({exc.reason})"
     client.check_hostname = host is not None
-    client.verify_flags |= ssl.VERIFY_X509_PARTIAL_CHAIN  # any certificate of --tls-ca is an anchor, as for rustls
     to_server, to_client = ssl.MemoryBIO(), ssl.MemoryBIO()
     ends = (client.wrap_bio(to_client, to_server, server_hostname=host),
             server.wrap_bio(to_server, to_client, server_side=True))

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import socket
 
-from cosim.protocol.security import ZENOH_AUTH_ENV, ClientSecurity
+from cosim.protocol.security import NAME_MISMATCH, ZENOH_AUTH_ENV, ClientSecurity, verifying_context
 from cosim.protocol.transport.session import UNIX_SOCKET, split_endpoint
 
 _LOGIN_REFUSED = (f"it refused our login: ${ZENOH_AUTH_ENV} (or --auth-file) must be the one the coordinator printed "
@@ -64,14 +64,14 @@ def tls_cause(endpoint: str, security: ClientSecurity, timeout: float = 3.0) -> 
     if proto not in ("tcp", "tls"):
         return _LOGIN_REFUSED
     try:
-        context = ssl.SSLContext(ssl.PROTOCOL_TLS_CLIENT)
-        if proto == "tcp":  # does it speak TLS there? (then tcp/ cannot work)
-            context.check_hostname, context.verify_mode = False, ssl.CERT_NONE
-        elif security.tls_ca is not None:
-            context.load_verify_locations(security.tls_ca)
-            context.verify_flags |= ssl.VERIFY_X509_PARTIAL_CHAIN  # any certificate of it an anchor, as for rustls
+        if proto == "tls" and security.tls_ca is not None:
+            context = verifying_context(security.tls_ca)
         else:
-            context.load_default_certs()
+            context = ssl.SSLContext(ssl.PROTOCOL_TLS_CLIENT)
+            if proto == "tcp":  # does it speak TLS there? (then tcp/ cannot work)
+                context.check_hostname, context.verify_mode = False, ssl.CERT_NONE
+            else:
+                context.load_default_certs()
         if security.tls_cert is not None and security.tls_key is not None:  # (never ask for a pass phrase)
             context.load_cert_chain(security.tls_cert, security.tls_key, password=lambda: b"")
     except (ssl.SSLError, OSError) as exc:  # Zenoh took the files; say what Python's ssl makes of them
@@ -91,7 +91,7 @@ def tls_cause(endpoint: str, security: ClientSecurity, timeout: float = 3.0) -> 
                 pass
     except ssl.SSLCertVerificationError as exc:
         why = exc.verify_message or str(exc)
-        if "mismatch" in why or "not valid for" in why:
+        if exc.verify_code in NAME_MISMATCH:
             return f"its certificate is not for {host}, the address this subsim was given ({why}): use the name or " \
                    "address the coordinator printed"
         if security.tls_ca is None:
