@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from cosim.contract import PROTOCOL_VERSION, CosimError, MalformedReply, SubsimError
-from cosim.runtime import DEFAULT_HISTORY, ModelFactory, Runtime, maker_name
+from cosim.runtime import DEFAULT_HISTORY, ModelFactory, Runtime, float_samples, maker_name
 from cosim.subsim import Param, Port, Subsim
 
 Pending = Callable[[], "IntervalResult"]
@@ -125,11 +125,9 @@ class SubsimHandle:
         """Samples given as nested lists (as a handle in this process takes them) as an array, to go on the wire;
         what is no array of real numbers is refused as in this process (not as a wire format or codec error)."""
         try:
-            if np.iscomplexobj(value):
-                raise TypeError("complex")
-            return np.asarray(value, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise SubsimError("bad_value", f"inputs.{port}: not a float array", self.name, "run_interval") from None
+            return float_samples(port, value)
+        except CosimError as exc:
+            raise SubsimError(exc.code, exc.message, self.name, "run_interval") from None
 
     def _checked(self, r: dict, times: np.ndarray) -> IntervalResult:
         """A run_interval reply that holds what the description and the request say it must, or a one-line error

@@ -156,6 +156,17 @@ def _same(a: Any, b: Any) -> bool:
         return False
 
 
+def float_samples(port: str, value: Any) -> np.ndarray:
+    """Input samples as float64, or a ``bad_value`` CosimError naming ``inputs.<port>``: nothing that is no array of
+    real numbers (a complex one included: a cast would drop its imaginary part with only a warning)."""
+    try:
+        if np.iscomplexobj(value):
+            raise TypeError("complex")
+        return np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise CosimError("bad_value", f"inputs.{port}: not a float array") from None
+
+
 def maker_name(factory: Any) -> str:
     """What makes a model, as a call names it: ``Boom`` for the class or ``partial(Boom, 2)``, else what it is."""
     made = getattr(factory, "func", factory)  # (functools.partial)
@@ -515,12 +526,7 @@ class Runtime:
         for name, port in self.inputs.items():
             v = inputs[name]
             if type(v) is not np.ndarray or v.dtype != np.float64:
-                try:
-                    if np.iscomplexobj(v):  # (a cast would drop the imaginary part with only a warning)
-                        raise TypeError("complex")
-                    v = np.asarray(v, dtype=np.float64)
-                except (TypeError, ValueError):
-                    raise CosimError("bad_value", f"inputs.{name}: not a float array") from None
+                v = float_samples(name, v)
             if v.shape != (times.size, port.size):
                 raise CosimError(
                     "bad_value", f"inputs.{name}: expected shape ({times.size}, {port.size}), got {v.shape}"
