@@ -240,6 +240,9 @@ class Bus:
     _spawned_as: dict[str, tuple[str, str | None, float | None, Elsewhere | None]] = field(default_factory=dict,
                                                                                          repr=False)
     _generation: dict[str, int] = field(default_factory=dict, repr=False)  # replacements respawn started, by name
+    # the Zenoh ids of the processes that have served each name in this run: a handle to its replacement ignores one
+    # that wakes up and answers again (it holds none of the run's state now)
+    _served: dict[str, set] = field(default_factory=dict, repr=False)
 
     @classmethod
     def open(cls, listen: str = "tcp/127.0.0.1:0", run: str | None = None, security: Security | None = None,
@@ -314,7 +317,8 @@ class Bus:
     def attach(self, name: str, timeout: float = 60.0, wait: float = 10.0) -> RemoteHandle:
         """Handle to a subsim that is (or soon will be) serving ``name`` in this run."""
         self._check_named(name)
-        handle = RemoteHandle(self.session, self.run, name, timeout=timeout, key=self.key(name))
+        handle = RemoteHandle(self.session, self.run, name, timeout=timeout, key=self.key(name),
+                              served=self._served.setdefault(name, set()))
         try:
             handle.wait_ready(wait)
         except Exception:
@@ -375,7 +379,8 @@ class Bus:
             except OSError:  # the launcher is gone already: its exit is reported below
                 pass
         relay = StderrRelay(popen.stderr)
-        handle = RemoteHandle(self.session, self.run, name, timeout=timeout, key=self.key(name))
+        handle = RemoteHandle(self.session, self.run, name, timeout=timeout, key=self.key(name),
+                              served=self._served.setdefault(name, set()))
         handle.exit_status = partial(exit_status, popen, elsewhere, DEATH_REAPED, relay)
         if lease:
             handle.lease = lease

@@ -95,8 +95,8 @@ class Session:
         spec = self.scenario.subsims[name]
         if spec.external:  # nothing else is printed until it is back: say why, what is awaited, and from whom
             self.log(f"cosim: external subsim {name!r} {why or 'was lost'}; it must attach again: waiting up to "
-                     f"{self.external_wait:g} s for it (once the old process has exited: two copies answering as one "
-                     "stop the run)\n" + attach_lines(self.bus, self.scenario, name, self.listen, first=False))
+                     f"{self.external_wait:g} s for it (the old process, should it wake up once a new one has "
+                     "attached, is ignored)\n" + attach_lines(self.bus, self.scenario, name, self.listen, first=False))
             # not a first start's '--run and --name': the same command, not started again
             try:
                 handle: SubsimHandle = attach(self.bus, self.scenario, name, self.timeout, self.external_wait,

@@ -359,52 +359,135 @@ def test_a_model_stuck_in_advance_is_found_and_the_run_fails_when_every_replacem
         assert time.monotonic() - started < 20  # two 1 s deadlines and a restart, not a 30 s model
 
 
+class ExternalRun:
+    """`cosim run` of the oscillator with mass2 external (``run``: lines added to its [run] table) beside an undisturbed
+    run's CSV; the 'user' starts mass2 with the command the coordinator prints. Every process is ended on exit."""
+
+    def __init__(self, tmp_path: Path, stop: float, run: str = "") -> None:
+        text = OSCILLATOR.read_text()
+        external = tmp_path / "ext.toml"
+        external.write_text(text.replace('[subsims.mass2]\nmodel = "subsims.oscillator.subsim:Mass"',
+                                         '[subsims.mass2]\nexternal = true\nmodel = "subsims.oscillator.subsim:Mass"')
+                            + (f"\n[run]\n{run}\n" if run else ""))
+        cmd = [sys.executable, "-m", "cosim.cli", "run", "--stop", f"{stop:g}", "--quiet"]
+        self.clean, self.result = tmp_path / "clean.csv", tmp_path / "ext.csv"
+        clean = subprocess.run([*cmd, str(OSCILLATOR), "--output", str(self.clean)], capture_output=True, text=True,
+                               timeout=300)
+        assert clean.returncode == 0, clean.stderr
+        self.coord = subprocess.Popen([*cmd, str(external), "--output", str(self.result)], stdout=subprocess.PIPE,
+                                      stderr=subprocess.PIPE, text=True)
+        self.users: list[subprocess.Popen] = []
+        self.lines: list[str] = []
+        self.env, self.command = dict(os.environ), None
+        assert self.coord.stderr is not None
+        for line in self.coord.stderr:
+            self.lines.append(line)
+            words = line.split()
+            if "cosim.serve" in words:  # VAR=value ... python -m cosim.serve ... (the run's secrets go in the env)
+                at = words.index("python")
+                self.env.update(w.split("=", 1) for w in words[:at])
+                self.command = [sys.executable, *words[at + 1:]]
+                break
+        assert self.command is not None
+        self._reader = threading.Thread(target=lambda: self.lines.extend(self.coord.stderr), daemon=True)
+        self._reader.start()
+
+    def start_user(self, **popen: object) -> subprocess.Popen:
+        assert self.command is not None
+        self.users.append(subprocess.Popen(self.command, env=self.env, **popen))  # type: ignore[call-overload]
+        return self.users[-1]
+
+    def wait_for(self, text: str, timeout: float = 60.0) -> None:
+        deadline = time.monotonic() + timeout
+        while not any(text in line for line in self.lines):
+            assert time.monotonic() < deadline and self.coord.poll() is None, "".join(self.lines)
+            time.sleep(0.05)
+
+    def finish(self) -> str:
+        """The coordinator's standard error once it has ended (asserting it succeeded)."""
+        self.coord.wait(timeout=300)
+        self._reader.join(timeout=10)
+        err = "".join(self.lines)
+        assert self.coord.returncode == 0, err
+        return err
+
+    def __enter__(self) -> ExternalRun:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        for p in [self.coord, *self.users]:
+            if p.poll() is None:
+                if p.returncode is None:
+                    try:
+                        os.kill(p.pid, signal.SIGCONT)  # (a stopped process takes no SIGKILL until continued)
+                    except ProcessLookupError:
+                        pass
+                p.kill()
+            p.wait()
+
+
 @pytest.mark.slow
 def test_an_external_subsim_that_disappears_is_waited_for_and_restored(tmp_path: Path) -> None:
     """`cosim run` with mass2 external: the 'user' starts it, it is killed mid-run, the user starts it again with
     the same command; the run goes on and the CSV equals an undisturbed run's."""
-    scenario = Path(__file__).resolve().parents[1] / "scenarios" / "oscillator.toml"
-    text = scenario.read_text()
-    external = tmp_path / "ext.toml"
-    external.write_text(text.replace('[subsims.mass2]\nmodel = "subsims.oscillator.subsim:Mass"',
-                                     '[subsims.mass2]\nexternal = true\nmodel = "subsims.oscillator.subsim:Mass"'))
-    cmd = [sys.executable, "-m", "cosim.cli", "run", "--stop", "30", "--quiet"]
-    clean = subprocess.run([*cmd, str(scenario), "--output", str(tmp_path / "clean.csv")], capture_output=True,
-                           text=True, timeout=300)
-    assert clean.returncode == 0, clean.stderr
-    coord = subprocess.Popen([*cmd, str(external), "--output", str(tmp_path / "ext.csv")],
-                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    users: list[subprocess.Popen] = []
-    try:
-        command = None
-        assert coord.stderr is not None
-        env = dict(os.environ)
-        for line in coord.stderr:
-            words = line.split()
-            if "cosim.serve" in words:  # VAR=value ... python -m cosim.serve ... (the run's secrets go in the env)
-                at = words.index("python")
-                env.update(w.split("=", 1) for w in words[:at])
-                command = [sys.executable, *words[at + 1:]]
-                break
-        assert command is not None
-        users.append(subprocess.Popen(command, stderr=subprocess.DEVNULL, env=env))
+    with ExternalRun(tmp_path, stop=30) as run:
+        first = run.start_user(stderr=subprocess.DEVNULL)
         time.sleep(2.0)  # mid-run
-        users[0].kill()
-        users[0].wait()
+        first.kill()
+        first.wait()
         time.sleep(0.5)
-        users.append(subprocess.Popen(command, stderr=subprocess.DEVNULL, env=env))
-        _, err = coord.communicate(timeout=300)
-        assert coord.returncode == 0, err
+        run.start_user(stderr=subprocess.DEVNULL)
+        err = run.finish()
         assert "mass2 died" in err
         waiting = "; it must attach again: waiting up to 300 s for it"
         assert err.index(waiting) < err.index("mass2 died")  # said while waiting, not only once it is back
         assert "cosim: external subsim 'mass2' died (mass2." in err  # and why it is waited for (a multi-host probe)
-        assert (tmp_path / "ext.csv").read_bytes() == (tmp_path / "clean.csv").read_bytes()
-    finally:
-        for p in [coord, *users]:
-            if p.poll() is None:
-                p.kill()
-            p.wait()
+        assert run.result.read_bytes() == run.clean.read_bytes()
+
+
+@pytest.mark.slow
+def test_an_external_subsim_stopped_past_its_lease_leaves_as_it_wakes_beside_its_replacement(tmp_path: Path) -> None:
+    """mass2 is stopped (SIGSTOP) for longer than its 2 s lease: the run counts it lost and asks for it again; its
+    operator starts it again; then the old process wakes up. It answers nothing more and exits with code 3, saying
+    why, and the run ends as an undisturbed one (it stopped with [duplicate] when the old process answered again)."""
+    with ExternalRun(tmp_path, stop=60, run="lease = 2") as run:
+        old = run.start_user(stderr=subprocess.PIPE, text=True)
+        time.sleep(2.0)
+        old.send_signal(signal.SIGSTOP)
+        stopped = time.monotonic()
+        run.wait_for("it must attach again")
+        run.start_user(stderr=subprocess.DEVNULL)
+        run.wait_for("replaced (1 of")
+        time.sleep(max(0.0, stopped + 4.0 - time.monotonic()))  # stopped 4 s in all: twice its lease
+        old.send_signal(signal.SIGCONT)
+        _, said = old.communicate(timeout=30)
+        assert old.returncode == 3, said
+        assert "mass2: stopping as it stood still for " in said and "longer than its 2 s lease" in said, said
+        err = run.finish()
+        assert "[duplicate]" not in err
+        assert run.result.read_bytes() == run.clean.read_bytes()
+
+
+@pytest.mark.slow
+def test_a_replaced_process_that_answers_again_is_ignored_not_taken_for_a_copy(tmp_path: Path) -> None:
+    """mass2 is stopped for less than its 10 s lease: the run finds it hung by its 2 s deadline and asks for it
+    again; its operator starts it again; the old process wakes up and goes on serving (it was not stopped long
+    enough to know it was replaced). Its replies are ignored (the run stopped with [duplicate]): the run ends as an
+    undisturbed one."""
+    with ExternalRun(tmp_path, stop=60, run="timeout = 2") as run:
+        old = run.start_user(stderr=subprocess.DEVNULL)
+        time.sleep(2.0)
+        old.send_signal(signal.SIGSTOP)
+        run.wait_for("it must attach again")
+        run.start_user(stderr=subprocess.DEVNULL)
+        run.wait_for("replaced (1 of")
+        old.send_signal(signal.SIGCONT)
+        time.sleep(1.0)
+        assert run.coord.poll() is None, "the run ended before the old process was heard again: a longer --stop"
+        err = run.finish()
+        assert "[duplicate]" not in err and "mass2 hung" in err, err
+        assert old.wait(timeout=30) == 0  # the run's shutdown reached it too
+        assert run.result.read_bytes() == run.clean.read_bytes()
 
 
 def test_the_deadline_follows_measured_request_times() -> None:

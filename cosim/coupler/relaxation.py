@@ -193,11 +193,19 @@ class NotConverged(RuntimeError):
         shorter = "a shorter [coupling] interval (max_halvings > 0 halves it only where needed)"
         trends = {_trend(residuals[n]) for n in failing}
         roundoff = _roundoff(failing, residuals, values) if trends == {"stalled"} else None
+        hovering = None if roundoff is not None else _hovering(failing, residuals, values)
         if roundoff is not None:  # a shorter interval would stall at the same level: the tolerances ask too much
             (name, level, size), floor = roundoff, 10.0 ** math.ceil(math.log10(1.5 * roundoff[1]))
             lines.append(f"  to try: res = {floor:.0e} (the absolute tolerance, in [coupling] or per signal in "
                          f"[tolerances]): {name}'s residual stopped falling at {level:.2e}, the round-off of values "
                          f"near {size:.3g} (a relative {level / size:.1e}), which no interval or stage count removes")
+        elif hovering is not None:  # noise up and down by decades: its window trends say growing or falling at random
+            (name, level, size), floor = hovering, 10.0 ** math.ceil(math.log10(1.5 * hovering[1]))
+            lines.append(f"  to try: res = {floor:.0e} (the absolute tolerance, in [coupling] or per signal in "
+                         f"[tolerances]), or tighter tolerances in the models (an ODE solver's or an FMU's rtol): "
+                         f"{name}'s residual goes up and down near {level:.1e} (a relative {level / size:.0e} of its "
+                         f"values) with no trend over its last {HOVER_STAGES} stages, the models' own error, which no "
+                         "interval or stage count removes")
         elif "growing" in trends:
             lines.append(f"  to try: {shorter}: the iteration diverges (the residuals grow), the coupling too strong "
                          "for an interval this long")
@@ -230,6 +238,37 @@ def _roundoff(failing: Sequence[str], residuals: Mapping[str, list[float]], valu
             return None
         size, level = float(np.min(np.max(np.abs(values[name]), axis=0), initial=np.inf)), max(r[-4:])
         if not 0.0 < level <= ROUNDOFF * size:
+            return None
+        found.append((level, name, size))
+    level, name, size = max(found)
+    return name, level, size
+
+
+HOVER_STAGES = 16  # stages of a residual going up and down with no trend, a small part of the values: noise
+HOVER_RELATIVE = 1e-6  # (a limit cycle of the coupling itself swings by a larger part of them)
+
+
+def _hovering(failing: Sequence[str], residuals: Mapping[str, list[float]], values: Mapping[str, np.ndarray] | None
+              ) -> tuple[str, float, float] | None:
+    """(signal, its level, the size of its values) with the highest level, when every failing signal's residual
+    hovers: over its last ``HOVER_STAGES`` stages its logarithm scatters about a straight line by more than a tenth
+    of a decade and by more than that line rises or falls over them, at a level (the largest of its last 8 stages)
+    within ``HOVER_RELATIVE`` of its values' size. That is noise, the models' own error (an FMU in model exchange
+    at its solver's rtol): it goes up and down by decades, so the windows :func:`_trend` compares say growing or
+    falling by chance. A contraction or a growth, however slow or swinging, moves along its line. Else None."""
+    if not values:
+        return None
+    found = []
+    for name in failing:
+        r = residuals.get(name, [])
+        late = [(i, math.log10(x)) for i, x in enumerate(r[-HOVER_STAGES:]) if x > 0.0]
+        if len(r) < HOVER_STAGES or len(late) < 6:
+            return None
+        stage, log = np.array(late).T
+        slope, offset = np.polyfit(stage, log, 1)
+        scatter = float(np.std(log - (slope * stage + offset)))
+        size, level = float(np.min(np.max(np.abs(values[name]), axis=0), initial=np.inf)), max(r[-8:])
+        if scatter < 0.1 or abs(slope) * HOVER_STAGES > scatter or not 0.0 < level <= HOVER_RELATIVE * size:
             return None
         found.append((level, name, size))
     level, name, size = max(found)

@@ -158,12 +158,18 @@ class RemoteHandle(SubsimHandle):
     times, so a stopped or stuck process is found long before ``timeout``.
 
     With ``key`` (the subsim's key, :func:`cosim.protocol.security.subsim_key`) every request is sealed
-    and only a reply carrying the subsim's tag for that request is believed (docs/protocol.md 4.1)."""
+    and only a reply carrying the subsim's tag for that request is believed (docs/protocol.md 4.1).
+
+    ``served``: the Zenoh ids of the processes that served ``name`` earlier in the run (shared by its handles, this
+    one adds the process it adopts). One of them answering beside this handle's process is an old process woken up
+    after it was replaced (a subsim stopped longer than its lease): its replies are ignored, and counted in
+    ``stale``, not taken for a second copy started by hand."""
 
     checks_replies = True  # the process may be anyone's implementation of the protocol
 
     def __init__(
-        self, session: zenoh.Session, run: str, name: str, timeout: float = 60.0, key: bytes | None = None
+        self, session: zenoh.Session, run: str, name: str, timeout: float = 60.0, key: bytes | None = None,
+        served: set | None = None,
     ) -> None:
         self.session, self.run, self.name = session, run, check_name(name, "subsim name")
         self._sealer = None if key is None else sealer(key)
@@ -177,6 +183,8 @@ class RemoteHandle(SubsimHandle):
         self._born = time.monotonic()  # a pause before its process was asked for made no process of it leave
         self._server: Any = None  # the Zenoh id of the process that answers (its first valid reply's)
         self._server_lost = False  # a token of this name went since ``_server`` answered: it may be another's now
+        self._served = set() if served is None else served
+        self.stale: dict[Any, int] = {}  # replies ignored, by the Zenoh id of an earlier process that sent them
         self._in_flight: set[_Pending] = set()
         # A declared querier costs about 35 us less per request than session.get; its timeout is fixed at
         # declaration. Zenoh keeps a task of about 1.1 KB per query for the query's whole timeout, however soon
@@ -245,10 +253,10 @@ class RemoteHandle(SubsimHandle):
             seq, frame = self._seal(encode_request("status"))
             replies = [r for r in self.session.get(self._key, payload=frame, timeout=1.0, target=EVERY_QUERYABLE,
                                                    consolidation=zenoh.ConsolidationMode.NONE) if r.ok is not None]
-            for r in replies:
-                if self._open(seq, r.ok.payload.to_bytes()) is not None:
-                    self._server = self._server or r.replier_id.zid
-                    return
+            genuine = [r.replier_id.zid for r in replies if self._open(seq, r.ok.payload.to_bytes()) is not None]
+            if genuine:  # a process new to this run's name rather than an earlier one still (or again) up
+                self._adopt(next((z for z in genuine if z not in self._served), genuine[0]))
+                return
             untagged += len(replies)
             now = time.monotonic()
             silent = now - (silent_since or now)
@@ -261,6 +269,10 @@ class RemoteHandle(SubsimHandle):
                                   "running with this run's COSIM_SECRET? (a subsim silently drops requests sealed "
                                   "with another key)", self.name, "connect")
             time.sleep(0.01)
+
+    def _adopt(self, server: Any) -> None:
+        self._server = self._server or server
+        self._served.add(self._server)
 
     def _begin(self, cmd: str, args: dict[str, Any]) -> Callable[[], dict]:
         if self._died.is_set() and not self._still_served():
@@ -311,7 +323,10 @@ class RemoteHandle(SubsimHandle):
                     continue
                 server = reply.replier_id.zid
                 if self._server is None:
-                    self._server = server
+                    self._adopt(server)
+                elif server != self._server and server in self._served:  # replaced earlier, woken up since
+                    self.stale[server] = self.stale.get(server, 0) + 1
+                    continue
                 elif server != self._server and self._server_lost:  # its process died, and one started since
                     raise self._died_error("its process died, and the process now serving its name was started "
                                            "since (it holds none of this run's state)", cmd)
