@@ -188,6 +188,36 @@ def verifying_context(ca: Path) -> ssl.SSLContext:
     return context
 
 
+BASIC_CONSTRAINTS = bytes.fromhex("0603551d13")  # the OID 2.5.29.19 as DER puts it before the extension's value
+
+
+def is_ca_certificate(der: bytes) -> bool:
+    """Whether the DER certificate ``der`` says basicConstraints cA = TRUE. (Python's ssl shows no extension but the
+    subjectAltName; the extension is read where its OID stands: [critical BOOLEAN], OCTET STRING { SEQUENCE { cA
+    BOOLEAN, ... } }, with short lengths, as a basicConstraints always has.)"""
+    at = der.find(BASIC_CONSTRAINTS)
+    if at < 0:
+        return False
+    value = der[at + len(BASIC_CONSTRAINTS):]
+    if value[:2] == b"\x01\x01":  # critical
+        value = value[3:]
+    return value[:1] == b"\x04" and value[2:3] == b"\x30" and value[4:6] == b"\x01\x01" and value[6:7] == b"\xff"
+
+
+def rustls_refuses(peer: dict, der: bytes) -> str | None:
+    """What Zenoh's rustls refuses in a router certificate that Python's ssl verified (``peer``: its
+    ``getpeercert()``, ``der``: the same in DER), said after "the certificate": a CA's certificate as a server's own,
+    and an address only in the subject's CN. Else None."""
+    if is_ca_certificate(der):
+        return ("is a CA certificate (basicConstraints CA:TRUE, what 'openssl req -x509' makes unless told otherwise), "
+                "which Zenoh's TLS refuses as a router's own: sign a router certificate with a CA "
+                "(docs/reliability.md, Switching it on)")
+    if not peer.get("subjectAltName"):
+        return ("names its address in its subject's CN only, which Zenoh's TLS does not read: make it with a "
+                "subjectAltName (-addext 'subjectAltName=DNS:<name>,IP:<address>')")
+    return None
+
+
 def tls_problem(cert: Path, key: Path, ca: Path | None, host: str | None) -> str | None:
     """Why a subsim given ``ca`` would refuse the router that shows ``cert`` (with ``key``) at ``host``, found by a TLS
     handshake between two contexts in memory (nothing sent); None when it would not. ``host`` None: no name checked
@@ -230,5 +260,6 @@ def tls_problem(cert: Path, key: Path, ca: Path | None, host: str | None) -> str
             except ssl.SSLError:
                 return None
         if all(done):
-            return None
+            why = rustls_refuses(ends[0].getpeercert(), ends[0].getpeercert(binary_form=True))
+            return None if why is None else f"--tls-cert {cert} {why}"
     return None

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import socket
 
-from cosim.protocol.security import NAME_MISMATCH, ZENOH_AUTH_ENV, ClientSecurity, verifying_context
+from cosim.protocol.security import NAME_MISMATCH, ZENOH_AUTH_ENV, ClientSecurity, rustls_refuses, verifying_context
 from cosim.protocol.transport.session import UNIX_SOCKET, split_endpoint
 
 _LOGIN_REFUSED = (f"it refused our login: ${ZENOH_AUTH_ENV} (or --auth-file) must be the one the coordinator printed "
@@ -84,6 +84,9 @@ def tls_cause(endpoint: str, security: ClientSecurity, timeout: float = 3.0) -> 
         with raw, context.wrap_socket(raw, server_hostname=host) as tls:
             if proto == "tcp":
                 return f"it speaks TLS there: connect with tls/{host}:{port} and --tls-ca (the coordinator's CA)"
+            refused = rustls_refuses(tls.getpeercert(), tls.getpeercert(binary_form=True) or b"")
+            if refused is not None:  # Python's ssl took it, Zenoh's did not: the coordinator's side to fix
+                return f"its certificate {refused}; the coordinator's operator must change it"
             tls.settimeout(0.5)  # TLS 1.3: a client certificate it asks for and does not take is refused after
             try:
                 tls.recv(1)
