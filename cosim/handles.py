@@ -33,6 +33,7 @@ class Description:
     history_limit: int
     protocol: int
     params: dict[str, Param] = field(default_factory=dict)  # declared parameters (optional in a reply)
+    code: dict[str, str] = field(default_factory=dict)  # module -> digest of its file (cosim.importing.code_digests)
 
     @classmethod
     def from_result(cls, r: Mapping[str, Any]) -> Description:
@@ -43,6 +44,7 @@ class Description:
             r["name"], r["model"], ports(r["inputs"]), ports(r["outputs"]), r["algebraic"], r["configured"],
             r.get("time"), r["history_limit"], r["protocol"],
             {k: Param(p.get("default"), p.get("unit", ""), p.get("doc", "")) for k, p in r.get("params", {}).items()},
+            dict(r.get("code", {})),
         )
 
 

@@ -10,6 +10,7 @@ which decide between two scenarios' modules of the same name in one interpreter 
 from __future__ import annotations
 
 import ast
+import hashlib
 import importlib
 import importlib.machinery
 import importlib.util
@@ -17,7 +18,7 @@ import os
 import sys
 import sysconfig
 import traceback
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -167,3 +168,45 @@ def _models_in(module_name: str) -> list[str]:
         if spec.submodule_search_locations is None:  # a module, not a package: no subsim module in it
             break
     return found
+
+
+def code_digests(module: str) -> dict[str, str]:
+    """The model code this process runs, as ``{module name: the first 16 hex digits of its file's SHA-256}``: every
+    module loaded here from the top-level package of ``module`` (or ``module`` alone). A subsim's ``describe`` says it
+    (``code``), and a coordinator compares it with its own files of those modules (:func:`differing_code`): a subsim
+    moved to another machine with an older copy of its package ran there without a word."""
+    top = module.partition(".")[0]
+    if top == "__main__":  # a script's name, not its file: another process's __main__ is another script
+        return {}
+    found = {}
+    for name, loaded in list(sys.modules.items()):
+        if name == top or name.startswith(top + "."):
+            digest = _file_digest(getattr(loaded, "__file__", None))
+            if digest is not None:
+                found[name] = digest
+    return found
+
+
+def _file_digest(path: str | None) -> str | None:
+    if not path or not path.endswith(".py"):
+        return None
+    try:
+        return hashlib.sha256(Path(path).read_bytes()).hexdigest()[:16]
+    except OSError:
+        return None
+
+
+def differing_code(code: Mapping[str, str]) -> list[str]:
+    """The modules of ``code`` (another process's :func:`code_digests`) whose file on this machine differs, found by
+    name on the import path (parent packages are imported; nothing else is); those not found here are not
+    compared."""
+    differ = []
+    for name, digest in sorted(code.items()):
+        try:
+            spec = importlib.util.find_spec(name)
+        except Exception:  # (a parent package that cannot be imported here: nothing to compare with)
+            continue
+        mine = _file_digest(spec.origin if spec is not None and spec.has_location else None)
+        if mine is not None and mine != digest:
+            differ.append(name)
+    return differ

@@ -24,6 +24,7 @@ from cosim.coupler.plan import Plan
 from cosim.coupler.relaxation import Interval, RunSummary, Settings
 from cosim.driver import Abandoned, Coordinator, Deadline, Recovery, plan_for
 from cosim.handles import Description, InProcessHandle, SubsimHandle
+from cosim.importing import differing_code
 from cosim.launch import PRIVATE, UNSPECIFIED_HOSTS, Bus, Elsewhere, SubsimProcess, endpoint_for
 from cosim.outputs import OutputError, reserve_output, resume_path
 from cosim.progress import Progress
@@ -108,8 +109,18 @@ class Session:
             handle = self._respawn_elsewhere(name)
         else:
             handle = self.bus.respawn(name, timeout=self.timeout).handle
-        handle.configure(spec.params, t0=self.scenario.start)
+        self.check_code(name, handle.configure(spec.params, t0=self.scenario.start))
         return handle
+
+    def check_code(self, name: str, description: Description) -> None:
+        """Say so when subsim ``name``, served from another machine or started by hand, runs other code than this
+        machine has for the same modules: the same scenario run here would compute something else."""
+        spec = self.scenario.subsims[name]
+        differ = differing_code(description.code) if spec.external or spec.launcher else []
+        if differ:
+            shown = ", ".join(differ[:4]) + (f" and {len(differ) - 4} more" if len(differ) > 4 else "")
+            self.log(f"cosim: {name} runs other code than this machine has for {shown} (the files differ): its "
+                     "results may differ from the same run here")
 
     def _respawn_elsewhere(self, name: str) -> SubsimHandle:
         """A subsim on another machine, started again through its launcher. When it cannot start (the network
@@ -228,6 +239,7 @@ def open_session(
                 while True:
                     try:
                         session.descriptions[name] = handles[name].configure(spec.params, t0=scenario.start)
+                        session.check_code(name, session.descriptions[name])
                         break
                     except SubsimError as exc:
                         if bus is None or spec.external or not _may_start_again(session, exc, name):
@@ -369,25 +381,57 @@ def host_addresses() -> list[str]:
     return [] if found.startswith("127.") or found == "0.0.0.0" else [found]
 
 
-SIOCGIFADDR = 0x8915  # Linux's ioctl for an interface's IPv4 address
+SIOCGIFFLAGS, IFF_UP = 0x8913, 0x1  # Linux's ioctl for an interface's flags, and the flag of one that is up
+RTM_GETADDR, NLM_F_DUMP_REQUEST, NLMSG_DONE, NLMSG_ERROR, IFA_ADDRESS, IFA_LOCAL = 22, 0x301, 3, 2, 1, 2  # rtnetlink
 
 
 def interface_addresses() -> list[str]:
-    """The IPv4 addresses of this machine's interfaces but loopback (Linux; elsewhere none)."""
+    """The IPv4 addresses of this machine's interfaces that are up, but loopback: every one of an interface, not only
+    its first (Linux, asked over rtnetlink; elsewhere none). A lab machine's second address was missed, and a down
+    interface's address offered (a multi-host probe)."""
     if not sys.platform.startswith("linux"):
         return []
     import fcntl
     import struct
 
+    try:
+        with socket.socket(socket.AF_NETLINK, socket.SOCK_RAW, socket.NETLINK_ROUTE) as nl:
+            nl.settimeout(2.0)
+            nl.send(struct.pack("=IHHII", 24, RTM_GETADDR, NLM_F_DUMP_REQUEST, 1, 0)
+                    + struct.pack("=BBBBI", socket.AF_INET, 0, 0, 0, 0))  # nlmsghdr + ifaddrmsg: every IPv4 one
+            by_index: list[tuple[int, str]] = []
+            done = False
+            while not done:
+                data, at = nl.recv(65536), 0
+                while at + 16 <= len(data):
+                    length, kind = struct.unpack_from("=IH", data, at)
+                    if kind in (NLMSG_DONE, NLMSG_ERROR) or length < 16:
+                        done = True
+                        break
+                    index = struct.unpack_from("=I", data, at + 20)[0]  # ifaddrmsg's interface index
+                    attrs, address = at + 24, {}
+                    while attrs + 4 <= at + length:
+                        size, what = struct.unpack_from("=HH", data, attrs)
+                        if size < 4:
+                            break
+                        if what in (IFA_ADDRESS, IFA_LOCAL) and size == 8:
+                            address[what] = socket.inet_ntoa(data[attrs + 4:attrs + 8])
+                        attrs += (size + 3) & ~3
+                    if address:
+                        by_index.append((index, address.get(IFA_LOCAL, address.get(IFA_ADDRESS, ""))))
+                    at += (length + 3) & ~3
+    except OSError:  # no rtnetlink here (a sandbox): nothing to offer
+        return []
     found = []
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        for _, interface in socket.if_nameindex():
+        for index, address in by_index:
             try:
-                packed = fcntl.ioctl(s.fileno(), SIOCGIFADDR, struct.pack("256s", interface[:15].encode()))
-            except OSError:  # no IPv4 address on it
+                name = socket.if_indextoname(index)
+                flags = struct.unpack_from("=H", fcntl.ioctl(s.fileno(), SIOCGIFFLAGS,
+                                                             struct.pack("256s", name[:15].encode())), 16)[0]
+            except OSError:  # gone meanwhile
                 continue
-            address = socket.inet_ntoa(packed[20:24])
-            if not address.startswith("127.") and address not in found:
+            if flags & IFF_UP and not address.startswith("127.") and address not in found:
                 found.append(address)
     return found
 

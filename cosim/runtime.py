@@ -19,7 +19,7 @@ from typing import Any, NamedTuple, NoReturn
 import numpy as np
 
 from cosim.contract import PROTOCOL_VERSION, CosimError
-from cosim.importing import own_frame
+from cosim.importing import code_digests, own_frame
 from cosim.signals import SegmentError, check_scheme, check_time_grid, interpolant
 from cosim.subsim import IntervalTooLong, ModelError, Port, Subsim, as_ports, resolve_params
 
@@ -308,6 +308,7 @@ class Runtime:
             "history_limit": self.history_limit,
             "protocol": PROTOCOL_VERSION,
             "params": {k: {"default": p.default, "unit": p.unit, "doc": p.doc} for k, p in self.model.params.items()},
+            "code": code_digests(type(self.model).__module__),
         }
 
     def configure(self, params: Mapping[str, Any], t0: float = 0.0) -> dict:

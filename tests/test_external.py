@@ -211,3 +211,28 @@ def test_an_external_subsim_serving_another_model_is_refused_naming_both(tmp_pat
             "serves subsims.integrator.subsim.Integrator, which refused its params (configure: bad parameter: "
             "unknown parameter(s)") in err, err
     assert err.rstrip().endswith("start it with the command printed for it"), err
+
+
+@pytest.mark.parametrize("edited", [False, True], ids=["same-code", "edited-copy"])
+def test_an_external_subsim_running_other_code_than_this_machines_is_said(tmp_path: Path, procs: list,
+                                                                          edited: bool) -> None:
+    """mass2 served from a copy of the subsims package with its model's file edited (an older checkout on the
+    machine it moved to): the run went on without a word; now one line names the module whose file differs. The
+    same code says nothing."""
+    import shutil
+
+    copy = tmp_path / "there"
+    shutil.copytree(ROOT / "subsims", copy / "subsims", ignore=shutil.ignore_patterns("__pycache__", "*.fmu", "build*"))
+    if edited:
+        model = copy / "subsims" / "oscillator" / "model.py"
+        model.write_text(model.read_text() + "\n# an older copy of this file\n")
+    coord, attach = start_waiting(tmp_path, procs, "--output", str(tmp_path / "x.csv"))
+    user = subprocess.Popen([sys.executable, *attach["command"][1:]], stderr=subprocess.DEVNULL, cwd=copy,
+                            env={**os.environ, **attach["env"], "PYTHONPATH": str(copy)})
+    procs.append(user)
+    _, err = coord.communicate(timeout=120)
+    assert coord.returncode == 0, err
+    said = "cosim: mass2 runs other code than this machine has for subsims.oscillator.model (the files differ): its " \
+           "results may differ from the same run here"
+    assert (said in err) is edited, err
+    assert err.count("runs other code") == edited

@@ -137,3 +137,38 @@ def test_a_model_class_of_the_running_script_is_refused_for_a_subsim_process(tmp
         run_scenario(scenario, output=tmp_path / "z.csv", progress=False, log=lambda m: None)
     done = run_scenario(scenario, output=tmp_path / "p.csv", inprocess=True, progress=False, log=lambda m: None)
     assert done.summary.t_end == 1.0
+
+
+def test_code_digests_name_the_package_files_loaded_and_differing_code_compares_what_is_here(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """What a subsim's describe says of its code (``code``) and how a coordinator compares it (the end-to-end case:
+    tests/test_external.py)."""
+    import hashlib
+    import importlib
+    import re
+
+    from cosim.contract import ProtocolError
+    from cosim.importing import code_digests, differing_code
+    from cosim.protocol.messages import decode_reply, encode_result
+
+    pkg = tmp_path / "digestpkg"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("")
+    (pkg / "model.py").write_text("X = 1\n")
+    (pkg / "unused.py").write_text("Y = 2\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    importlib.import_module("digestpkg.model")
+    code = code_digests("digestpkg.model")
+    assert code == {name: hashlib.sha256((pkg / f"{file}.py").read_bytes()).hexdigest()[:16]
+                    for name, file in (("digestpkg", "__init__"), ("digestpkg.model", "model"))}  # loaded ones only
+    assert code_digests("__main__") == {}  # a script's name: another process's __main__ is another file
+    assert differing_code(code) == []
+    assert differing_code({**code, "digestpkg.model": "0" * 16, "nowhere.here": "1" * 16}) == ["digestpkg.model"]
+    (pkg / "model.py").write_text("X = 2\n")  # edited since
+    assert differing_code(code) == ["digestpkg.model"]
+    described = {"name": "a", "model": "m.M", "inputs": {}, "outputs": {}, "algebraic": False, "configured": False,
+                 "history_limit": 1, "protocol": 1}
+    assert decode_reply("describe", encode_result({**described, "code": code}))["code"] == code
+    with pytest.raises(ProtocolError, match=re.escape("result.code.m: expected a string, got 3")):
+        decode_reply("describe", encode_result({**described, "code": {"m": 3}}))  # (msgpack refuses keys not str)

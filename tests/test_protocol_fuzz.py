@@ -74,6 +74,7 @@ from cosim.protocol.wire import (
     t_params,
     t_port_map,
     t_str,
+    t_str_map,
 )
 from cosim.runtime import Runtime
 from subsims.integrator.subsim import Integrator
@@ -270,6 +271,8 @@ def valid(check: Checker) -> st.SearchStrategy:
         return st.dictionaries(NAMES, decl, max_size=3)
     if check is t_any_map:
         return st.dictionaries(st.text(max_size=6), params_values, max_size=4)
+    if check is t_str_map:
+        return st.dictionaries(NAMES, st.text(max_size=16), max_size=3)
     raise AssertionError(f"no strategy for checker {check!r}: extend tests/test_protocol_fuzz.py")
 
 
@@ -319,6 +322,8 @@ def invalid(check: Checker) -> st.SearchStrategy:
         return st.tuples(st.one_of(not_(dict), st.dictionaries(NAMES, bad_decl, min_size=1, max_size=2)), st.just(bad))
     if check is t_any_map:
         return st.tuples(not_(dict), st.just(bad))
+    if check is t_str_map:
+        return st.tuples(st.one_of(not_(dict), st.dictionaries(NAMES, not_(str), min_size=1, max_size=2)), st.just(bad))
     raise AssertionError(f"no strategy for checker {check!r}")
 
 

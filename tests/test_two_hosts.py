@@ -329,6 +329,24 @@ def test_listening_on_every_address_without_a_route_out_tells_the_subsim_its_one
     assert done.stdout.startswith(f"tcp/{hosts.addr_a}:7447 {hosts.addr_a} is this machine's address"), done.stdout
 
 
+def test_every_address_of_an_interface_that_is_up_is_offered_and_none_of_one_that_is_down(hosts: Hosts) -> None:
+    """A lab machine with a second address on its interface (missed: only an interface's first was read) and an
+    interface that is down (its address was offered, though no subsim could reach it there)."""
+    octet = hosts.addr_a.split(".")[2]
+    second, down = f"10.232.{octet}.1", f"10.233.{octet}.1"
+    tag = hosts.link_a[3:]
+    for step in (("-n", hosts.a, "addr", "add", f"{second}/24", "dev", hosts.link_a),
+                 ("-n", hosts.a, "link", "add", f"cvd{tag}", "type", "veth", "peer", "name", f"cve{tag}"),
+                 ("-n", hosts.a, "addr", "add", f"{down}/24", "dev", f"cvd{tag}")):  # (left down)
+        done = _ip(*step)
+        assert done.returncode == 0, done.stderr
+    code = "from cosim.runner import interface_addresses; print(*interface_addresses())"
+    done = subprocess.run([*hosts.exec(hosts.a), sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=60, cwd=Path(__file__).resolve().parents[1])
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split() == [hosts.addr_a, second], done.stdout
+
+
 def test_a_launched_subsim_needs_an_endpoint_its_machine_can_be_told(tmp_path: Path) -> None:
     scenario = tmp_path / "launched.toml"
     scenario.write_text(OSCILLATOR.read_text().replace("[subsims.mass2]\n",

@@ -46,6 +46,7 @@ from cosim.protocol.wire import (
     t_params,
     t_port_map,
     t_str,
+    t_str_map,
     unpack_map,
 )
 
@@ -60,6 +61,7 @@ DESCRIPTION_FIELDS: Fields = {
     "history_limit": (t_int, True),
     "protocol": (t_int, True),
     "params": (t_param_decls, False),
+    "code": (t_str_map, False),
 }
 
 REQUESTS: dict[str, Fields] = {

@@ -190,6 +190,13 @@ def t_param_decls(v: Any, path: str) -> dict[str, dict]:
     return {t_str(k, f"{path} key"): check_fields(d, PARAM_FIELDS, f"{path}.{k}", strict=False) for k, d in v.items()}
 
 
+def t_str_map(v: Any, path: str) -> dict[str, str]:
+    m = t_any_map(v, path)
+    for k, x in m.items():
+        t_str(x, f"{path}.{k}")
+    return m
+
+
 def t_any_map(v: Any, path: str) -> dict:
     if not isinstance(v, dict):
         raise bad(path, "a map", v)
