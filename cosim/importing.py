@@ -171,10 +171,11 @@ def _models_in(module_name: str) -> list[str]:
 
 
 def code_digests(module: str) -> dict[str, str]:
-    """The model code this process runs, as ``{module name: the first 16 hex digits of its file's SHA-256}``: every
-    module loaded here from the top-level package of ``module`` (or ``module`` alone). A subsim's ``describe`` says it
-    (``code``), and a coordinator compares it with its own files of those modules (:func:`differing_code`): a subsim
-    moved to another machine with an older copy of its package ran there without a word."""
+    """The model code this process runs, as ``{module name: the first 16 hex digits of the SHA-256 of its file}``
+    (line ends as LF: a Windows checkout is the same code): every module loaded here from the top-level package of
+    ``module`` (or ``module`` alone). A subsim's ``describe`` says it (``code``), and a coordinator compares it with
+    its own files of that package (:func:`differing_code`): a subsim moved to another machine with an older copy of
+    its package ran there without a word."""
     top = module.partition(".")[0]
     if top == "__main__":  # a script's name, not its file: another process's __main__ is another script
         return {}
@@ -191,22 +192,37 @@ def _file_digest(path: str | None) -> str | None:
     if not path or not path.endswith(".py"):
         return None
     try:
-        return hashlib.sha256(Path(path).read_bytes()).hexdigest()[:16]
+        return hashlib.sha256(Path(path).read_bytes().replace(b"\r\n", b"\n")).hexdigest()[:16]
     except OSError:
         return None
 
 
-def differing_code(code: Mapping[str, str]) -> list[str]:
-    """The modules of ``code`` (another process's :func:`code_digests`) whose file on this machine differs, found by
-    name on the import path (parent packages are imported; nothing else is); those not found here are not
-    compared."""
+def differing_code(code: Mapping[str, str], model: str) -> list[str]:
+    """The modules of ``code`` (another process's :func:`code_digests`) in the top-level package of ``model``
+    (``package.module[:Class]``) whose file on this machine differs. Files are looked up by name under where that
+    package is found on this machine's import path, nothing imported; modules not found here are not compared, nor
+    any of another package (the names come from the other process)."""
+    top = model.partition(":")[0].partition(".")[0]
+    try:
+        spec = importlib.util.find_spec(top) if top and top != "__main__" else None  # (a top-level name: no import)
+    except (ImportError, ValueError):
+        spec = None
+    if spec is None or not spec.has_location:
+        return []
+    roots = list(spec.submodule_search_locations or [])  # a package's directories; none for a lone module
     differ = []
     for name, digest in sorted(code.items()):
-        try:
-            spec = importlib.util.find_spec(name)
-        except Exception:  # (a parent package that cannot be imported here: nothing to compare with)
+        if name == top:
+            path = spec.origin
+        elif name.startswith(top + ".") and roots:
+            parts = name.split(".")[1:]
+            if not all(part.isidentifier() for part in parts):
+                continue
+            path = next((str(p) for root in roots for p in (Path(root, *parts).with_suffix(".py"),
+                                                              Path(root, *parts, "__init__.py")) if p.is_file()), None)
+        else:
             continue
-        mine = _file_digest(spec.origin if spec is not None and spec.has_location else None)
+        mine = _file_digest(path)
         if mine is not None and mine != digest:
             differ.append(name)
     return differ

@@ -5,8 +5,7 @@ The environment must hold the subsim's key (``COSIM_SECRET``) and its router log
 never go on the command line, which ``ps`` shows.
 
 Exit codes: 0 after ``shutdown``, SIGTERM, SIGINT or the coordinator's leaving (its liveliness token deleted); 3 when
-its router has been unreachable for 2 s (a cut link, or the coordinator killed: a supervisor may start it again) or
-when it stood still for longer than its lease (SIGSTOP, a suspended machine: it was replaced, or is waited for); 2
+its router has been unreachable for 2 s (a cut link, or the coordinator killed: a supervisor may start it again); 2
 when the coordinator cannot be reached in time or the arguments are bad. Every path closes the Zenoh
 session (an open session keeps the process alive forever).
 """
@@ -30,7 +29,7 @@ from cosim.contract import PROTOCOL_VERSION, VERSION, CosimError
 from cosim.protocol.keys import check_name
 from cosim.protocol.security import SECRET_ENV, ZENOH_AUTH_ENV, ClientSecurity
 from cosim.protocol.transport.reach import tls_cause, unreachable
-from cosim.protocol.transport.server import CommandServer, PauseClock
+from cosim.protocol.transport.server import CommandServer
 from cosim.protocol.transport.session import client_config, error_text, zenoh_mismatch
 from cosim.runtime import DEFAULT_HISTORY, Runtime
 from cosim.subsim import Subsim
@@ -40,19 +39,19 @@ class _Stop(BaseException):
     """Raised in the main thread by SIGTERM/SIGINT (delivered while ``recv`` waits)."""
 
 
-_why_stopping: list[tuple[str, int]] = []  # why this process sent itself SIGTERM, when it did, and its exit code
+_why_stopping: list[str] = []  # why this process sent itself SIGTERM, when it did
 
 
 def _raise_stop(signum: int, frame: object) -> None:
-    raise _Stop(_why_stopping[0][0] if _why_stopping else f"on {signal.Signals(signum).name}")
+    raise _Stop(_why_stopping[0] if _why_stopping else f"on {signal.Signals(signum).name}")
 
 
 _router_lost = threading.Event()  # nothing to close politely: Zenoh's close would wait for it about 8 s
 EXIT_LINK_LOST = 3  # the router was lost (a cut link, or the coordinator's end): for a supervisor to start it again
 
 
-def _stop_self(why: str, exit_code: int = 0) -> None:
-    _why_stopping.append((why, exit_code))
+def _stop_self(why: str) -> None:
+    _why_stopping.append(why)
     os.kill(os.getpid(), signal.SIGTERM)
 
 
@@ -147,27 +146,14 @@ LINK_LOST = (f"as the coordinator's router has been unreachable for {ROUTER_GRAC
              "(a cut link), start this same command again: the run restores this subsim")
 
 
-def stood_still(seconds: float, lease: float) -> str:
-    """Why a subsim that stood still for ``seconds`` stops (it answers nothing more: :class:`PauseClock`)."""
-    return (f"as it stood still for {seconds:.0f} s (stopped, or its machine suspended), longer than its {lease:g} s "
-            "lease: its coordinator counts it lost and may have a replacement serving already; if the coordinator "
-            "still waits for this subsim, start this same command again")
-
-
-def _watch_router(session: zenoh.Session, clock: PauseClock, grace: float = ROUTER_GRACE) -> None:
-    """SIGTERM ourselves when the coordinator's router has been unreachable for ``grace`` seconds, or when this
-    process stood still for longer than its lease (``clock``).
+def _watch_router(session: zenoh.Session, grace: float = ROUTER_GRACE) -> None:
+    """SIGTERM ourselves when the coordinator's router has been unreachable for ``grace`` seconds.
 
     A client whose router vanished gets no liveliness DELETE (its only link is gone), so poll.
     """
     lost_since = None
     while True:
         time.sleep(0.25)
-        paused = clock.tick()
-        if paused is not None:  # its session may reconnect by itself: leave before it answers as a second copy
-            _router_lost.set()
-            _stop_self(stood_still(paused, clock.lease), EXIT_LINK_LOST)
-            return
         try:
             connected = any(True for _ in session.info.routers_zid())
         except Exception:  # session closed: we are exiting anyway
@@ -176,7 +162,7 @@ def _watch_router(session: zenoh.Session, clock: PauseClock, grace: float = ROUT
         lost_since = None if connected else (lost_since or now)
         if lost_since is not None and now - lost_since >= grace:
             _router_lost.set()
-            _stop_self(LINK_LOST, EXIT_LINK_LOST)
+            _stop_self(LINK_LOST)
             return
 
 
@@ -224,15 +210,13 @@ def main(model_cls: type[Subsim] | Subsim, argv: Sequence[str] | None = None, pr
     server: CommandServer | None = None
     try:
         try:  # a signal may come at any point from here on, even before serving starts (it is ready to be seen)
-            clock = PauseClock(args.lease)
             server = CommandServer(
                 session, args.run, runtime, on_coordinator_lost=lambda: _stop_self("as the coordinator left"),
                 key=args.security.key, max_request=args.max_request, queue_size=args.queue,
                 on_never_sealed=lambda: say(f"{args.name}: requests arrive, but none is sealed with our key: is "
                                             f"{SECRET_ENV} the one the coordinator printed for run {args.run}?"),
-                pause_clock=clock,
             )
-            threading.Thread(target=_watch_router, args=(session, clock), daemon=True, name="router-watch").start()
+            threading.Thread(target=_watch_router, args=(session,), daemon=True, name="router-watch").start()
             if not args.quiet_start:
                 say(f"{args.name}: serving run {args.run} via {args.connect} as Zenoh id {session.zid()} "
                     f"(pid {os.getpid()})")  # (the id a coordinator's [duplicate] error names)
@@ -253,6 +237,6 @@ def main(model_cls: type[Subsim] | Subsim, argv: Sequence[str] | None = None, pr
         if _router_lost.is_set():  # the router is gone: leave now (the system closes our sockets)
             sys.stdout.flush()
             sys.stderr.flush()
-            os._exit(_why_stopping[0][1] if _why_stopping else 0)  # (the first reason: not if it was stopping anyway)
+            os._exit(EXIT_LINK_LOST if _why_stopping[:1] == [LINK_LOST] else 0)  # not if it was stopping anyway
         session.close()
     return 0

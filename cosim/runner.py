@@ -116,7 +116,8 @@ class Session:
         """Say so when subsim ``name``, served from another machine or started by hand, runs other code than this
         machine has for the same modules: the same scenario run here would compute something else."""
         spec = self.scenario.subsims[name]
-        differ = differing_code(description.code) if spec.external or spec.launcher else []
+        model = spec.model or description.model  # (an external subsim's scenario need not name its model)
+        differ = differing_code(description.code, model) if spec.external or spec.launcher else []
         if differ:
             shown = ", ".join(differ[:4]) + (f" and {len(differ) - 4} more" if len(differ) > 4 else "")
             self.log(f"cosim: {name} runs other code than this machine has for {shown} (the files differ): its "

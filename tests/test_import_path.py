@@ -163,12 +163,27 @@ def test_code_digests_name_the_package_files_loaded_and_differing_code_compares_
     assert code == {name: hashlib.sha256((pkg / f"{file}.py").read_bytes()).hexdigest()[:16]
                     for name, file in (("digestpkg", "__init__"), ("digestpkg.model", "model"))}  # loaded ones only
     assert code_digests("__main__") == {}  # a script's name: another process's __main__ is another file
-    assert differing_code(code) == []
-    assert differing_code({**code, "digestpkg.model": "0" * 16, "nowhere.here": "1" * 16}) == ["digestpkg.model"]
+    model = "digestpkg.model:M"
+    assert differing_code(code, model) == []
+    assert differing_code({**code, "digestpkg.model": "0" * 16, "digestpkg.nowhere": "1" * 16}, model) == \
+        ["digestpkg.model"]
     (pkg / "model.py").write_text("X = 2\n")  # edited since
-    assert differing_code(code) == ["digestpkg.model"]
+    assert differing_code(code, model) == ["digestpkg.model"]
+    (pkg / "model.py").write_bytes(b"X = 1\r\n")  # the same code from a Windows checkout (a red team)
+    assert differing_code(code, model) == []
+    # names of other packages, which the other process chose, are neither compared nor imported (a red team: the
+    # coordinator imported 'this' and printed the Zen of Python); nor is a subpackage's __init__ run to find a file
+    (pkg / "sub").mkdir()
+    (pkg / "sub" / "__init__.py").write_text("raise SystemExit('imported')\n")
+    (pkg / "sub" / "leaf.py").write_text("Z = 3\n")
+    assert differing_code({"this": "0" * 16, "digestpkg.sub.leaf": "0" * 16}, model) == ["digestpkg.sub.leaf"]
+    imported = "this" in sys.modules
+    assert differing_code({"this": "0" * 16}, "this:X") == ["this"]  # a lone module: found by its file, not imported
+    assert ("this" in sys.modules) is imported
     described = {"name": "a", "model": "m.M", "inputs": {}, "outputs": {}, "algebraic": False, "configured": False,
                  "history_limit": 1, "protocol": 1}
     assert decode_reply("describe", encode_result({**described, "code": code}))["code"] == code
     with pytest.raises(ProtocolError, match=re.escape("result.code.m: expected a string, got 3")):
-        decode_reply("describe", encode_result({**described, "code": {"m": 3}}))  # (msgpack refuses keys not str)
+        decode_reply("describe", encode_result({**described, "code": {"m": 3}}))
+    with pytest.raises(ProtocolError, match=re.escape("result.code key: expected a string")):  # (it crashed the run)
+        decode_reply("describe", encode_result({**described, "code": {b"zz": "a", "x": "b"}}))

@@ -225,7 +225,8 @@ def test_an_external_subsims_command_never_hands_out_the_routers_key(certs: dict
 def rustls_refused_certs(certs: dict[str, Path], directory: Path) -> dict[str, tuple[Path, Path, Path]]:
     """(certificate, key, CA) that Python's ssl verifies for localhost and 127.0.0.1 but Zenoh's TLS refuses: a
     self-signed certificate with CA:TRUE (openssl req -x509's default) as its own CA, one with CA:TRUE signed by the
-    CA, one naming localhost in its CN only; and, taken by both, a self-signed one with CA:FALSE."""
+    CA, one naming localhost in its CN only, one with a URI as its only subjectAltName; and, taken by both, a
+    self-signed one with CA:FALSE."""
     from certs import EC, _openssl
 
     directory.mkdir()
@@ -238,7 +239,8 @@ def rustls_refused_certs(certs: dict[str, Path], directory: Path) -> dict[str, t
         _openssl("req", "-x509", *EC, "-keyout", f"{stem}.key", "-out", f"{stem}.pem", "-days", "2", "-subj",
                  "/CN=localhost", "-addext", sans, *extra, cwd=directory)
         made[name] = (directory / f"{stem}.pem", directory / f"{stem}.key", directory / f"{stem}.pem")
-    for name, ext in (("signed CA", f"{sans}\nbasicConstraints=CA:TRUE\n"), ("CN only", "basicConstraints=CA:FALSE\n")):
+    for name, ext in (("signed CA", f"{sans}\nbasicConstraints=CA:TRUE\n"), ("CN only", "basicConstraints=CA:FALSE\n"),
+                      ("URI only", "subjectAltName=URI:spiffe://x/y\nbasicConstraints=CA:FALSE\n")):
         stem = name.replace(" ", "_")
         (directory / f"{stem}.ext").write_text(ext)
         _openssl("req", *EC, "-keyout", f"{stem}.key", "-out", f"{stem}.csr", "-subj", "/CN=localhost", cwd=directory)
@@ -260,7 +262,8 @@ def test_what_zenohs_tls_refuses_and_pythons_takes_is_said_at_start(certs: dict[
     made = rustls_refused_certs(certs, tmp_path / "made")
     says = {"self-signed CA": "is a CA certificate (basicConstraints CA:TRUE",
             "signed CA": "is a CA certificate (basicConstraints CA:TRUE",
-            "CN only": "names its address in its subject's CN only, which Zenoh's TLS does not read"}
+            "CN only": "names no DNS name or IP address in a subjectAltName",
+            "URI only": "names no DNS name or IP address in a subjectAltName"}
     for name, (cert, key, ca) in made.items():
         with socket.socket() as free:  # (a lost race for the port fails the router's open: seen at once)
             free.bind(("127.0.0.1", 0))
@@ -316,4 +319,4 @@ def test_a_subsim_says_what_zenohs_tls_refuses_in_the_routers_certificate(certs:
             assert said.startswith("it refused our login"), said
         else:
             assert said.startswith("its certificate ") and "the coordinator's operator must change it" in said, said
-            assert ("is a CA certificate" if "CA" in name else "in its subject's CN only") in said, said
+            assert ("is a CA certificate" if "CA" in name else "names no DNS name or IP address") in said, said

@@ -207,14 +207,14 @@ def is_ca_certificate(der: bytes) -> bool:
 def rustls_refuses(peer: dict, der: bytes) -> str | None:
     """What Zenoh's rustls refuses in a router certificate that Python's ssl verified (``peer``: its
     ``getpeercert()``, ``der``: the same in DER), said after "the certificate": a CA's certificate as a server's own,
-    and an address only in the subject's CN. Else None."""
+    and no DNS name or IP address in its subjectAltName (only in the subject's CN, or a URI). Else None."""
     if is_ca_certificate(der):
         return ("is a CA certificate (basicConstraints CA:TRUE, what 'openssl req -x509' makes unless told otherwise), "
                 "which Zenoh's TLS refuses as a router's own: sign a router certificate with a CA "
                 "(docs/reliability.md, Switching it on)")
-    if not peer.get("subjectAltName"):
-        return ("names its address in its subject's CN only, which Zenoh's TLS does not read: make it with a "
-                "subjectAltName (-addext 'subjectAltName=DNS:<name>,IP:<address>')")
+    if not any(kind in ("DNS", "IP Address") for kind, _ in peer.get("subjectAltName", ())):
+        return ("names no DNS name or IP address in a subjectAltName (a name in its subject's CN only, which Zenoh's "
+                "TLS does not read): make it with -addext 'subjectAltName=DNS:<name>,IP:<address>'")
     return None
 
 

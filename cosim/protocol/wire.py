@@ -193,6 +193,7 @@ def t_param_decls(v: Any, path: str) -> dict[str, dict]:
 def t_str_map(v: Any, path: str) -> dict[str, str]:
     m = t_any_map(v, path)
     for k, x in m.items():
+        t_str(k, f"{path} key")  # (msgpack lets bytes keys through)
         t_str(x, f"{path}.{k}")
     return m
 

@@ -7,10 +7,6 @@ nothing, drops frames without this subsim's tag and replays, refuses oversized o
 ``queue_size`` requests are already waiting, answers ``busy``. A flood therefore never stalls
 Zenoh's receive path (which would cost the subsim its link) and never reaches the model.
 
-A process that stood still for longer than its link's lease (SIGSTOP, a suspended machine) answers nothing more
-(:class:`PauseClock`): its router closed its session meanwhile, its coordinator counted it lost and may have a
-replacement serving its name, and two processes answering as one stop a run.
-
 A request that finds the subsim idle and is known to be quick (every command but ``configure``,
 ``shutdown`` and a ``run_interval`` slower than ``inline_limit`` last time) is answered right there
 on the callback thread: the hand-off to the serving thread and back cost a request about 35 us of
@@ -45,31 +41,6 @@ QUICK_COMMANDS = frozenset({"describe", "status", "commit", "rollback", "get_sta
 INLINE_LIMIT = 0.005  # s: a run_interval is answered where it arrives while the last one took at most this
 
 
-class PauseClock:
-    """Whether this process stood still for longer than ``lease`` seconds: ticked every fraction of a second by a
-    watching thread, asked by every query. Standing still is wall time passing without this process's CPU time (a
-    model busy in native code for that long is not paused: it runs)."""
-
-    def __init__(self, lease: float) -> None:
-        self.lease = lease
-        self._wall, self._cpu = time.monotonic(), time.process_time()
-
-    def stood_still(self) -> float | None:
-        """Seconds this process stood still since the last tick, if longer than the lease; else None."""
-        gap = time.monotonic() - self._wall
-        if gap <= self.lease or time.process_time() - self._cpu > 0.5 * gap:
-            return None
-        return gap
-
-    def tick(self) -> float | None:
-        """:meth:`stood_still`, then a new mark (a pause found is not forgotten: it is returned, and the caller
-        stops)."""
-        paused = self.stood_still()
-        if paused is None:
-            self._wall, self._cpu = time.monotonic(), time.process_time()
-        return paused
-
-
 class CommandServer:
     """Declares the rpc queryable, the liveliness token, and a watch on the coordinator's token."""
 
@@ -84,10 +55,8 @@ class CommandServer:
         queue_size: int = DEFAULT_QUEUE,
         inline_limit: float = INLINE_LIMIT,
         on_never_sealed: Callable[[], None] | None = None,
-        pause_clock: PauseClock | None = None,
     ) -> None:
         self.runtime = runtime
-        self.pause_clock = pause_clock  # (None: never stands still, as an in-test server on a shared session)
         self.gate = Gate(runtime, key, max_request)
         self._on_lost = on_coordinator_lost
         self._on_never_sealed = on_never_sealed  # called once: requests come, none ever sealed with our key
@@ -114,8 +83,8 @@ class CommandServer:
         """zenoh-python's thread for this queryable: checks, then answers a quick request or queues it."""
         try:
             key_expr = query.key_expr
-            if str(key_expr) != self._rpc or (self.pause_clock is not None and self.pause_clock.stood_still()):
-                self.gate.counts["dropped"] += 1  # a wildcard or another key; or asked after a pause: replaced
+            if str(key_expr) != self._rpc:  # a wildcard or another key: not addressed to us
+                self.gate.counts["dropped"] += 1
                 query.__exit__()
                 return
             payload = query.payload
