@@ -162,8 +162,8 @@ class RemoteHandle(SubsimHandle):
 
     ``served``: the Zenoh ids of the processes that served ``name`` earlier in the run (shared by its handles, this
     one adds the process it adopts). One of them answering beside this handle's process is an old process woken up
-    after it was replaced (a subsim stopped longer than its lease): its replies are ignored, and counted in
-    ``stale``, not taken for a second copy started by hand."""
+    after it was replaced (a subsim stopped longer than its lease): its replies are ignored, not taken for a second
+    copy started by hand."""
 
     checks_replies = True  # the process may be anyone's implementation of the protocol
 
@@ -184,7 +184,6 @@ class RemoteHandle(SubsimHandle):
         self._server: Any = None  # the Zenoh id of the process that answers (its first valid reply's)
         self._server_lost = False  # a token of this name went since ``_server`` answered: it may be another's now
         self._served = set() if served is None else served
-        self.stale: dict[Any, int] = {}  # replies ignored, by the Zenoh id of an earlier process that sent them
         self._in_flight: set[_Pending] = set()
         # A declared querier costs about 35 us less per request than session.get; its timeout is fixed at
         # declaration. Zenoh keeps a task of about 1.1 KB per query for the query's whole timeout, however soon
@@ -325,7 +324,6 @@ class RemoteHandle(SubsimHandle):
                 if self._server is None:
                     self._adopt(server)
                 elif server != self._server and server in self._served:  # replaced earlier, woken up since
-                    self.stale[server] = self.stale.get(server, 0) + 1
                     continue
                 elif server != self._server and self._server_lost:  # its process died, and one started since
                     raise self._died_error("its process died, and the process now serving its name was started "
