@@ -417,12 +417,7 @@ class ExternalRun:
     def __exit__(self, *exc: object) -> None:
         for p in [self.coord, *self.users]:
             if p.poll() is None:
-                if p.returncode is None:
-                    try:
-                        os.kill(p.pid, signal.SIGCONT)  # (a stopped process takes no SIGKILL until continued)
-                    except ProcessLookupError:
-                        pass
-                p.kill()
+                p.kill()  # (a stopped process dies of it too)
             p.wait()
 
 
