@@ -314,11 +314,15 @@ class Bus:
         return subsim_command(module, endpoint or self.endpoint, self.run, name, model, python=python,
                               tls_ca=sec.tls_ca, tls_client=client, lease=lease)
 
+    def _remote_handle(self, name: str, timeout: float) -> RemoteHandle:
+        """A handle to subsim ``name`` of this run, with its key and the processes that served the name before."""
+        return RemoteHandle(self.session, self.run, name, timeout=timeout, key=self.key(name),
+                            served=self._served.setdefault(name, set()))
+
     def attach(self, name: str, timeout: float = 60.0, wait: float = 10.0) -> RemoteHandle:
         """Handle to a subsim that is (or soon will be) serving ``name`` in this run."""
         self._check_named(name)
-        handle = RemoteHandle(self.session, self.run, name, timeout=timeout, key=self.key(name),
-                              served=self._served.setdefault(name, set()))
+        handle = self._remote_handle(name, timeout)
         try:
             handle.wait_ready(wait)
         except Exception:
@@ -379,8 +383,7 @@ class Bus:
             except OSError:  # the launcher is gone already: its exit is reported below
                 pass
         relay = StderrRelay(popen.stderr)
-        handle = RemoteHandle(self.session, self.run, name, timeout=timeout, key=self.key(name),
-                              served=self._served.setdefault(name, set()))
+        handle = self._remote_handle(name, timeout)
         handle.exit_status = partial(exit_status, popen, elsewhere, DEATH_REAPED, relay)
         if lease:
             handle.lease = lease

@@ -195,17 +195,16 @@ class NotConverged(RuntimeError):
         roundoff = _roundoff(failing, residuals, values) if trends == {"stalled"} else None
         hovering = None if roundoff is not None else _hovering(failing, residuals, values)
         if roundoff is not None:  # a shorter interval would stall at the same level: the tolerances ask too much
-            (name, level, size), floor = roundoff, 10.0 ** math.ceil(math.log10(1.5 * roundoff[1]))
-            lines.append(f"  to try: res = {floor:.0e} (the absolute tolerance, in [coupling] or per signal in "
-                         f"[tolerances]): {name}'s residual stopped falling at {level:.2e}, the round-off of values "
-                         f"near {size:.3g} (a relative {level / size:.1e}), which no interval or stage count removes")
+            name, level, size = roundoff
+            lines.append(f"  to try: {_res_above(level)}: {name}'s residual stopped falling at {level:.2e}, the "
+                         f"round-off of values near {size:.3g} (a relative {level / size:.1e}), which no interval or "
+                         "stage count removes")
         elif hovering is not None:  # noise up and down by decades: its window trends say growing or falling at random
-            (name, level, size), floor = hovering, 10.0 ** math.ceil(math.log10(1.5 * hovering[1]))
-            lines.append(f"  to try: res = {floor:.0e} (the absolute tolerance, in [coupling] or per signal in "
-                         f"[tolerances]), or tighter tolerances in the models (an ODE solver's or an FMU's rtol): "
-                         f"{name}'s residual goes up and down near {level:.1e} (a relative {level / size:.0e} of its "
-                         f"values) with no trend over its last {HOVER_STAGES} stages, the models' own error, which no "
-                         "interval or stage count removes")
+            name, level, size = hovering
+            lines.append(f"  to try: {_res_above(level)}, or tighter tolerances in the models (an ODE solver's or an "
+                         f"FMU's rtol): {name}'s residual goes up and down near {level:.1e} (a relative "
+                         f"{level / size:.0e} of its values) with no trend over its last {HOVER_STAGES} stages, the "
+                         "models' own error, which no interval or stage count removes")
         elif "growing" in trends:
             lines.append(f"  to try: {shorter}: the iteration diverges (the residuals grow), the coupling too strong "
                          "for an interval this long")
@@ -217,6 +216,17 @@ class NotConverged(RuntimeError):
             lines.append(f"  to try: more [coupling] max_stages, or {shorter}")
         super().__init__("\n".join(lines))
         self.t0, self.t1, self.stages, self.failing, self.residuals = t0, t1, stages, failing, residuals
+
+
+def _res_above(level: float) -> str:
+    """The absolute tolerance to try for a residual stuck at ``level``: the next power of ten above 1.5 times it."""
+    return (f"res = {10.0 ** math.ceil(math.log10(1.5 * level)):.0e} (the absolute tolerance, in [coupling] or per "
+            "signal in [tolerances])")
+
+
+def _size(values: np.ndarray) -> float:
+    """How large a signal's samples (n, width) are: the smallest channel's largest magnitude."""
+    return float(np.min(np.max(np.abs(values), axis=0), initial=np.inf))
 
 
 ROUNDOFF = 1e-11  # a flat residual this small against its signal's values is taken for their round-off (45,000
@@ -236,7 +246,7 @@ def _roundoff(failing: Sequence[str], residuals: Mapping[str, list[float]], valu
         r = residuals[name]
         if len(r) < 8 or not 0.9 <= max(r[-4:]) / max(max(r[-8:-4]), 1e-300) <= 1.1:
             return None
-        size, level = float(np.min(np.max(np.abs(values[name]), axis=0), initial=np.inf)), max(r[-4:])
+        size, level = _size(values[name]), max(r[-4:])
         if not 0.0 < level <= ROUNDOFF * size:
             return None
         found.append((level, name, size))
@@ -271,7 +281,7 @@ def _hovering(failing: Sequence[str], residuals: Mapping[str, list[float]], valu
         stage, log = np.array(logs).T
         slope, offset = np.polyfit(stage, log, 1)
         scatter = float(np.std(log - (slope * stage + offset)))
-        size, level = float(np.min(np.max(np.abs(size), axis=0), initial=np.inf)), max(r[-8:])
+        size, level = _size(size), max(r[-8:])
         if abs(rise) > HOVER_TREND or scatter < 0.1 or not 0.0 < level <= HOVER_RELATIVE * size:
             return None
         found.append((level, name, size))
