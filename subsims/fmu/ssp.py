@@ -5,16 +5,17 @@ scenario TOML parses to, so ``cosim.scenario.parse`` checks them like any scenar
 Parameterization 1.0/2.0): every FMU component becomes a subsim (its FMU extracted to a directory that
 lives as long as this process; its ``implementation`` chooses the subsim's ``interface``), every
 connection a coupling (a ``LinearTransformation`` and a conversion between the units of its ends become
-the ``linear`` transform), parameter bindings (inline or ``.ssv`` files in the archive) become params,
-each value given with a ``unit`` converted to its FMU variable's unit, and ``DefaultExperiment`` gives
+the ``linear`` transform), parameter bindings of components and of the system (``subsims/fmu/ssp_params.py``:
+parameter sets, prefixes, parameter mappings, units) become params, and ``DefaultExperiment`` gives
 start and stop. Units are defined as in SSP and FMI (``Unit`` with ``BaseUnit``): in the SSD's or the
 parameter set's ``Units``, or the FMU's ``UnitDefinitions``. A companion ``system.toml`` beside
 ``system.ssp`` may add or override the top-level scenario tables (``stop``, ``[coupling]`` with method,
 interval, samples, tol ..., ``[tolerances]``, ``[output]``) and per-subsim params
 (``[subsims.<name>.params]``).
 Not supported (refused with the element named): nested systems, system-level connectors, signal
-dictionaries, components that are not FMUs, transformations other than linear ones, parameter mappings,
-units that cannot be converted (not defined, or of different dimensions) where a conversion is needed.
+dictionaries, components that are not FMUs, transformations other than linear ones on connections,
+references to SSD elements, units that cannot be converted (not defined, or of different dimensions) where a
+conversion is needed.
 """
 
 from __future__ import annotations
@@ -26,20 +27,21 @@ import tomllib
 import xml.etree.ElementTree as ET
 import zipfile
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
+from functools import partial
 from pathlib import Path, PurePosixPath
 from typing import Any
 
 from cosim.scenario import ScenarioError, check_subsim_name
 from subsims.fmu.scratch import process_dir
-from subsims.fmu.ssp_units import IDENTITY, Affine, Unit, compose, conversion, convert_value, unit_table
+from subsims.fmu.ssp_params import REAL_KINDS, Variables, binding_values, child, inner, local
+from subsims.fmu.ssp_units import IDENTITY, Affine, Unit, compose, conversion, unit_table
 
 MODEL = "subsims.fmu:FmuSubsim"
 FMU_TYPES = {"application/x-fmu-sharedlibrary", None}
 LAYOUT_ONLY = {"ConnectionGeometry", "Annotations"}  # children of a Connection that carry no coupling
 COMPANION_KEYS = {"name", "description", "start", "stop", "coupling", "tolerances", "output", "subsims"}
 IMPLEMENTATIONS = {"any": None, "CoSimulation": "cs", "ModelExchange": "me"}  # -> the FMU subsim's interface
-REAL_KINDS = {"Real", "Float64", "Float32"}
 
 
 def expand_fmu(spec: Mapping[str, Any], scenario: Path, start: float, key: str) -> dict[str, Any]:
@@ -78,145 +80,38 @@ def expand_fmu(spec: Mapping[str, Any], scenario: Path, start: float, key: str) 
     return {**table, "model": MODEL, "params": params}
 
 
-def _local(tag: str) -> str:
-    return tag.rsplit("}", 1)[-1]
-
-
-def _children(elem: ET.Element, name: str) -> list[ET.Element]:
-    return [c for c in elem if _local(c.tag) == name]
-
-
-def _child(elem: ET.Element, name: str) -> ET.Element | None:
-    found = _children(elem, name)
-    return found[0] if found else None
-
-
-def _inner(elem: ET.Element, name: str) -> list[ET.Element]:
-    """The children of ``elem``'s child ``name`` (none if it has no such child)."""
-    found = _child(elem, name)
-    return list(found) if found is not None else []
-
-
 def _extract_dir() -> Path:
     return Path(tempfile.mkdtemp(dir=process_dir("cosim-ssp-")))
 
 
-def _value(param: ET.Element, where: str) -> tuple[Any, str | None]:
-    """The parameter's value and the unit it is given in (a Real's ``unit``; None: the variable's own)."""
-    for typed in param:
-        kind, raw = _local(typed.tag), typed.get("value")
-        if raw is None:
-            continue
-        try:
-            if kind in REAL_KINDS:
-                return float(raw), typed.get("unit") or None
-            if kind in {"Integer", "Enumeration"} or kind.startswith(("Int", "UInt")):
-                return int(raw), None
-            if kind == "Boolean":
-                if raw not in {"true", "false", "1", "0"}:
-                    raise ValueError(raw)
-                return raw in {"true", "1"}, None
-            if kind == "String":
-                return raw, None
-        except ValueError:
-            raise ScenarioError(f"{where}: parameter {param.get('name')!r}: bad {kind} value {raw!r}") from None
-    raise ScenarioError(f"{where}: parameter {param.get('name')!r} has no Real/Integer/Boolean/String value")
-
-
-@dataclass
-class _Model:
-    """What the import needs of a component's FMU (its modelDescription.xml): the unit of each variable
-    ('' for none), the units it defines, and the interfaces it describes (CoSimulation, ModelExchange)."""
-
-    units: dict[str, str] = field(default_factory=dict)
-    defined: dict[str, Unit] = field(default_factory=dict)
-    interfaces: set[str] = field(default_factory=set)
-
-
-def _read_model(data: bytes) -> _Model | None:
-    """The FMU's :class:`_Model`; None when it cannot be read (the subsim's configure says why, in its words)."""
+def _read_model(data: bytes) -> Variables | None:
+    """The FMU's :class:`Variables`; None when it cannot be read (the subsim's configure says why, in its words)."""
     try:
         with zipfile.ZipFile(io.BytesIO(data)) as fmu:
             root = ET.fromstring(fmu.read("modelDescription.xml"))
     except (zipfile.BadZipFile, KeyError, ET.ParseError):
         return None
     declared = {}  # type name -> unit; FMI 2 wraps the type (SimpleType/Real), FMI 3 does not (Float64Type)
-    for typedef in _inner(root, "TypeDefinitions"):
-        typed = typedef[0] if _local(typedef.tag) == "SimpleType" and len(typedef) else typedef
+    for typedef in inner(root, "TypeDefinitions"):
+        typed = typedef[0] if local(typedef.tag) == "SimpleType" and len(typedef) else typedef
         declared[typedef.get("name", "")] = typed.get("unit", "")
-    model = _Model(interfaces={_local(c.tag) for c in root} & {"CoSimulation", "ModelExchange"})
-    for var in _inner(root, "ModelVariables"):
-        typed = var[0] if _local(var.tag) == "ScalarVariable" and len(var) else var
+    model = Variables(interfaces={local(c.tag) for c in root} & {"CoSimulation", "ModelExchange"})
+    for var in inner(root, "ModelVariables"):
+        typed = var[0] if local(var.tag) == "ScalarVariable" and len(var) else var
         model.units[var.get("name", "")] = typed.get("unit") or declared.get(typed.get("declaredType", ""), "")
     try:
-        model.defined = unit_table(_child(root, "UnitDefinitions"))
+        model.defined = unit_table(child(root, "UnitDefinitions"))
     except ValueError:
         return None  # a broken description: configure refuses the FMU
     return model
 
 
-def _parameters(binding: ET.Element, zf: zipfile.ZipFile, where: str, model: _Model | None,
-                ssd_units: dict[str, Unit]) -> dict[str, Any]:
-    """The binding's values by FMU variable name, each converted from the unit it is given in to its variable's."""
-    source = binding.get("source")
-    mapping = _child(binding, "ParameterMapping")
-    if mapping is not None:  # renaming (and transforming) values: not implemented, and ignoring it sets wrong ones
-        given = f" {mapping.get('source')!r}" if mapping.get("source") else ""
-        raise ScenarioError(f"{where}: parameter binding {source or '(inline)'}: its ParameterMapping{given} is not "
-                            "supported; name the parameters as the FMU's variables in the parameter set instead")
-    if source is not None:
-        if source.startswith("#"):
-            raise ScenarioError(f"{where}: parameter binding references ({source!r}) are not supported")
-        try:
-            root = ET.fromstring(zf.read(str(PurePosixPath(source))))
-        except KeyError:
-            raise ScenarioError(f"{where}: parameter file {source!r} is not in the archive") from None
-        except ET.ParseError as exc:
-            raise ScenarioError(f"{where}: parameter file {source!r} is not valid XML ({exc})") from None
-    else:
-        values = _child(binding, "ParameterValues")
-        root = _child(values, "ParameterSet") if values is not None else None
-        if root is None:
-            return {}
-    try:
-        own_units = unit_table(_child(root, "Units"))
-    except ValueError as exc:
-        raise ScenarioError(f"{where}: parameter set {source or '(inline)'}: {exc}") from None
-    prefix = binding.get("prefix", "")
-    out = {}
-    for params in _children(root, "Parameters"):
-        for param in _children(params, "Parameter"):
-            name = param.get("name", "")
-            if prefix and name.startswith(prefix):
-                name = name[len(prefix):]
-            value, unit = _value(param, where)
-            if unit is not None and model is not None and name in model.units:
-                value = _in_variable_unit(value, unit, name, model, [own_units, ssd_units], where)
-            out[name] = value
-    return out
-
-
-def _in_variable_unit(value: float, unit: str, name: str, model: _Model, units: list[dict[str, Unit]],
-                      where: str) -> float:
-    """SSP: a value with a unit is in that unit, the FMU takes it in its variable's."""
-    target = model.units[name]
-    if not target:
-        raise ScenarioError(f"{where}: parameter {name!r} is given in {unit!r} but FMU variable {name!r} declares "
-                            "no unit: give the value in the unit the FMU expects, without a unit attribute")
-    try:  # the parameter's unit is defined in its parameter set or the SSD (else the FMU), the variable's in the FMU
-        # (else the SSD, else the parameter set: an FMU may name its units without defining them)
-        return convert_value(value, unit, target, [*units, model.defined], [model.defined, *reversed(units)])
-    except ValueError as exc:
-        raise ScenarioError(f"{where}: parameter {name!r} is given in {unit!r} and FMU variable {name!r} is in "
-                            f"{target!r}: cannot convert, {exc}") from None
-
-
 @dataclass
 class _End:
-    """A component as a connection's end: its FMU's :class:`_Model` (None: unreadable) and the units its SSD
+    """A component as a connection's end: its FMU's :class:`Variables` (None: unreadable) and the units its SSD
     connectors declare (None: the FMU variable's)."""
 
-    model: _Model | None
+    model: Variables | None
     connectors: dict[str, str | None]
 
     def units(self, connector: str) -> tuple[str, str]:
@@ -225,12 +120,25 @@ class _End:
         return fmu, self.connectors.get(connector) or fmu
 
 
+def _bindings(element: ET.Element) -> list[ET.Element]:
+    return [b for b in inner(element, "ParameterBindings") if local(b.tag) == "ParameterBinding"]
+
+
+def _in_system(ends: dict[str, _End], where: str, name: str) -> tuple[str, Variables | None, str]:
+    """A name in a system's parameter set, ``<component>.<variable>``, as that component's variable."""
+    component, dot, variable = name.partition(".")  # (a component's name has no dot; a variable's may)
+    if not dot or not variable or component not in ends:
+        raise ScenarioError(f"{where}: parameter {name!r} names no component's variable (a system's parameters are "
+                            f"named <component>.<variable>; components: {sorted(ends)})")
+    return component, ends[component].model, variable
+
+
 def _connector_unit(connector: ET.Element) -> str | None:
-    typed = next((t for t in connector if _local(t.tag) in REAL_KINDS), None)
+    typed = next((t for t in connector if local(t.tag) in REAL_KINDS), None)
     return typed.get("unit") if typed is not None else None
 
 
-def _interface(comp: ET.Element, model: _Model | None, where: str, source: str) -> str | None:
+def _interface(comp: ET.Element, model: Variables | None, where: str, source: str) -> str | None:
     """The FMU subsim's ``interface`` for the component's ``implementation`` (None: the subsim's default)."""
     implementation = comp.get("implementation", "any")
     if implementation not in IMPLEMENTATIONS:
@@ -253,10 +161,10 @@ def _coupling(conn: ET.Element, ends: dict[str, _End], ssd_units: dict[str, Unit
     coupling: dict[str, Any] = {"to": f"{names[2]}.{names[3]}", "from": f"{names[0]}.{names[1]}"}
     linear: Affine | None = None
     for transform in conn:
-        if _local(transform.tag) in LAYOUT_ONLY:  # where an editor drew the line: nothing to couple
+        if local(transform.tag) in LAYOUT_ONLY:  # where an editor drew the line: nothing to couple
             continue
-        if _local(transform.tag) != "LinearTransformation":
-            raise ScenarioError(f"{where} {text}: {_local(transform.tag)} is not supported")
+        if local(transform.tag) != "LinearTransformation":
+            raise ScenarioError(f"{where} {text}: {local(transform.tag)} is not supported")
         try:
             linear = float(transform.get("factor", 1.0)), float(transform.get("offset", 0.0))
         except ValueError:
@@ -317,13 +225,13 @@ def read_ssp(path: str | Path) -> dict[str, Any]:
             raise ScenarioError(f"{path}: not an SSP file (no SystemStructure.ssd in the archive)") from None
         except ET.ParseError as exc:
             raise ScenarioError(f"{path}: SystemStructure.ssd is not valid XML ({exc})") from None
-        system = _child(root, "System")
+        system = child(root, "System")
         if system is None:
             raise ScenarioError(f"{path}: SystemStructure.ssd has no System")
         # (the name names the default results file: a tool's "Plant/Controller" must not make it a path)
         name = re.sub(r"[/\\\0]", "_", root.get("name") or "").strip(" .") or path.stem
         raw: dict[str, Any] = {"name": name, "subsims": {}, "couplings": []}
-        experiment = _child(root, "DefaultExperiment")
+        experiment = child(root, "DefaultExperiment")
         if experiment is not None:
             for attr, key in (("startTime", "start"), ("stopTime", "stop")):
                 if experiment.get(attr) is not None:
@@ -332,17 +240,17 @@ def read_ssp(path: str | Path) -> dict[str, Any]:
                     except ValueError:
                         raise ScenarioError(f"{path}: DefaultExperiment {attr} is not a number") from None
         system_name = system.get("name") or "(unnamed)"
-        if _child(system, "SignalDictionaries") is not None:  # its entries' units and types would go unread
+        if child(system, "SignalDictionaries") is not None:  # its entries' units and types would go unread
             raise ScenarioError(f"{path}: system {system_name!r}: signal dictionaries (SignalDictionaries) are not "
                                 "supported; connect the components' connectors directly")
         try:
-            ssd_units = unit_table(_child(root, "Units"))
+            ssd_units = unit_table(child(root, "Units"))
         except ValueError as exc:
             raise ScenarioError(f"{path}: SystemStructure.ssd Units: {exc}") from None
         target = _extract_dir()
         ends: dict[str, _End] = {}
-        for comp in _inner(system, "Elements"):
-            kind = _local(comp.tag)
+        for comp in inner(system, "Elements"):
+            kind = local(comp.tag)
             name = comp.get("name", "")
             where = f"{path}: component {name!r}"
             if kind == "System":
@@ -367,15 +275,22 @@ def read_ssp(path: str | Path) -> dict[str, Any]:
             fmu.write_bytes(data)
             model = _read_model(data)
             params: dict[str, Any] = {}
-            for binding in (b for b in _inner(comp, "ParameterBindings") if _local(b.tag) == "ParameterBinding"):
-                params.update(_parameters(binding, zf, where, model, ssd_units))
+            for binding in _bindings(comp):
+                for _, variable, value in binding_values(binding, zf, where, ssd_units,
+                                                         lambda n, c=name, m=model: (c, m, n)):
+                    params[variable] = value
             interface = _interface(comp, model, where, source)
             if interface is not None:  # before the companion's params, which override it
                 params["interface"] = interface
             params["fmu"] = str(fmu)
             raw["subsims"][name] = {"model": MODEL, "params": params}
-            ends[name] = _End(model, {c.get("name", ""): _connector_unit(c) for c in _inner(comp, "Connectors")})
-        for conn in (c for c in _inner(system, "Connections") if _local(c.tag) == "Connection"):
+            ends[name] = _End(model, {c.get("name", ""): _connector_unit(c) for c in inner(comp, "Connectors")})
+        for binding in _bindings(system):  # after the components': they win
+            where = f"{path}: system {system_name!r}"
+            for name, variable, value in binding_values(binding, zf, where, ssd_units,
+                                                        partial(_in_system, ends, where)):
+                raw["subsims"][name]["params"][variable] = value
+        for conn in (c for c in inner(system, "Connections") if local(c.tag) == "Connection"):
             raw["couplings"].append(_coupling(conn, ends, ssd_units, f"{path}: connection", system_name))
     if not raw["subsims"]:
         raise ScenarioError(f"{path}: the system has no FMU components")

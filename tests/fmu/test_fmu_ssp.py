@@ -34,10 +34,12 @@ def parameter_set(values: dict[str, float]) -> str:
            "</ssv:ParameterSet>"
 
 
-def ssd(components: str, connections: str, experiment: str = '<ssd:DefaultExperiment startTime="0" stopTime="0.5"/>'
-        ) -> str:
+def ssd(components: str, connections: str, experiment: str = '<ssd:DefaultExperiment startTime="0" stopTime="0.5"/>',
+        system_bindings: str = "") -> str:
+    """``system_bindings``: ParameterBinding elements of the system itself."""
     return (f'<?xml version="1.0" encoding="UTF-8"?>\n<ssd:SystemStructureDescription xmlns:ssd="{SSD}" '
             f'xmlns:ssc="{SSC}" xmlns:ssv="{SSV}" version="1.0" name="oscillator-ssp"><ssd:System name="top">'
+            f"<ssd:ParameterBindings>{system_bindings}</ssd:ParameterBindings>"
             f"<ssd:Elements>{components}</ssd:Elements><ssd:Connections>{connections}</ssd:Connections>"
             f"</ssd:System>{experiment}</ssd:SystemStructureDescription>")
 
@@ -61,12 +63,23 @@ def connection(start: str, end: str, factor: float | None = K12, layout: bool = 
             f"{inner}</ssd:Connection>")
 
 
+def mapping(entries: str, inline: bool = True) -> str:
+    """A ParameterMapping of ``entries`` (MappingEntry elements): inline, or the ``.ssm`` file's text."""
+    ssm = f'<ssm:ParameterMapping xmlns:ssm="{SSM}" version="1.0">{entries}</ssm:ParameterMapping>'
+    return f"<ssd:ParameterMapping>{ssm}</ssd:ParameterMapping>" if inline else ssm
+
+
 def oscillator_ssd() -> str:
-    inline = (f"<ssd:ParameterBinding><ssd:ParameterValues>{parameter_set({'m': 1.0, 'k': K, 'u0': 1.0})}"
-              "</ssd:ParameterValues></ssd:ParameterBinding>")
-    from_file = '<ssd:ParameterBinding source="resources/mass2.ssv" prefix="mass2."/>'
-    return ssd(component("mass1", inline) + component("mass2", from_file),
-               connection("mass2.u", "mass1.F", layout=True) + connection("mass1.u", "mass2.F"))
+    """mass1: an inline parameter set whose mass (in grams) a ParameterMapping turns into the FMU's m (in kg);
+    mass2: a file of bare names, bound on the system with the prefix 'mass2.' (SSP puts it before each name)."""
+    scale = ('<ssm:MappingEntry source="mass_g" target="m"><ssc:LinearTransformation factor="0.001"/>'
+             "</ssm:MappingEntry>")
+    inline = (f"<ssd:ParameterBinding><ssd:ParameterValues>{parameter_set({'mass_g': 1000.0, 'k': K, 'u0': 1.0})}"
+              f"</ssd:ParameterValues>{mapping(scale)}</ssd:ParameterBinding>")
+    on_system = '<ssd:ParameterBinding source="resources/mass2.ssv" prefix="mass2."/>'
+    return ssd(component("mass1", inline) + component("mass2", ""),
+               connection("mass2.u", "mass1.F", layout=True) + connection("mass1.u", "mass2.F"),
+               system_bindings=on_system)
 
 
 def write_ssp(path: Path, ssd_text: str | None, fmu: Path | None, extra: dict[str, str] | None = None) -> Path:
@@ -96,10 +109,10 @@ max_stages = 60
 def test_cosim_run_ssp_gives_the_same_run_as_the_toml_scenario(
     tmp_path: Path, fmus: dict[str, Path], capsys: pytest.CaptureFixture
 ) -> None:
-    """The SSP (inline and .ssv parameters with a prefix, linear transformations, DefaultExperiment) plus a
-    companion TOML with the coupling settings is the scenario scenarios/fmu/oscillator_fmu.toml with
-    method centralized: the run over Zenoh must be bit for bit the same."""
-    ssv = parameter_set({"mass2.m": 1.0, "mass2.k": K})
+    """The SSP (an inline parameter set with a mapping, an .ssv bound on the system with a prefix, linear
+    transformations, DefaultExperiment) plus a companion TOML with the coupling settings is the scenario
+    scenarios/fmu/oscillator_fmu.toml with method centralized: the run over Zenoh must be bit for bit the same."""
+    ssv = parameter_set({"m": 1.0, "k": K})
     ssp = write_ssp(tmp_path / "system.ssp", oscillator_ssd(), fmus["mass2"], {"resources/mass2.ssv": ssv})
     (tmp_path / "system.toml").write_text(COMPANION)
 
@@ -135,10 +148,16 @@ def test_cosim_run_ssp_gives_the_same_run_as_the_toml_scenario(
         ("missing_fmu", "component 'mass1': its FMU 'resources/other.fmu' is not in the archive"),
         ("system_connector", "connection top.u -> mass1.F: system-level connectors are not supported"),
         ("signal_dictionary", "system 'top': signal dictionaries (SignalDictionaries) are not supported"),
-        ("mapping_inline", "component 'mass1': parameter binding resources/m.ssv: its ParameterMapping is not "
-                           "supported; name the parameters as the FMU's variables in the parameter set instead"),
-        ("mapping_file", "component 'mass1': parameter binding (inline): its ParameterMapping 'resources/m.ssm' is "
-                         "not supported"),
+        ("mapped_twice", "component 'mass1': parameter mapping (inline) maps 'mass' twice"),
+        ("enumeration_mapping", "component 'mass1': parameter mapping 'resources/m.ssm', entry 'mass': "
+                                "EnumerationMappingTransformation is not supported"),
+        ("no_map_entry", "component 'mass1': parameter 'n' mapped to 'n': its IntegerMappingTransformation has no "
+                         "MapEntry for the value 3 (sources: [1, 2])"),
+        ("missing_ssm", "component 'mass1': parameter mapping 'resources/none.ssm' is not in the archive"),
+        ("in_the_fmu", "component 'mass1': a parameter file inside the component's FMU (sourceBase='component', "
+                       "'resources/m.ssv') is not supported; put it in the SSP archive"),
+        ("no_component", "system 'top': parameter 'mass' names no component's variable (a system's parameters are "
+                         "named <component>.<variable>; components: ['mass1'])"),
         ("bad_implementation", "component 'mass1': implementation 'Both' is not one of ['CoSimulation', "
                                "'ModelExchange', 'any']"),
         ("no_stop", "no stop time: give DefaultExperiment stopTime in the SSD or stop = ... in system.toml"),
@@ -151,9 +170,13 @@ def test_a_bad_ssp_is_one_clear_line(
     tmp_path: Path, fmus: dict[str, Path], capsys: pytest.CaptureFixture, case: str, phrase: str
 ) -> None:
     plain = component("mass1", "")
-    ssm = '<ssm:ParameterMapping version="1.0"><ssm:MappingEntry source="mass" target="m"/></ssm:ParameterMapping>'
-    inline = (f"<ssd:ParameterBinding><ssd:ParameterValues>{parameter_set({'k': K})}</ssd:ParameterValues>"
-              '<ssd:ParameterMapping source="resources/m.ssm"/></ssd:ParameterBinding>')
+    from_file = '<ssd:ParameterBinding source="resources/m.ssv">{}</ssd:ParameterBinding>'
+    twice = mapping('<ssm:MappingEntry source="mass" target="m"/><ssm:MappingEntry source="mass" target="k"/>')
+    integers = ('<ssv:Parameter name="n"><ssv:Integer value="3"/></ssv:Parameter>')
+    integer_set = parameter_set({}).replace("<ssv:Parameters>", f"<ssv:Parameters>{integers}")
+    integer_map = mapping('<ssm:MappingEntry source="n" target="n"><ssc:IntegerMappingTransformation>'
+                          '<ssc:MapEntry source="1" target="10"/><ssc:MapEntry source="2" target="20"/>'
+                          "</ssc:IntegerMappingTransformation></ssm:MappingEntry>")
     dictionary = ('<ssd:SignalDictionaries><ssd:SignalDictionary name="sigs"><ssd:DictionaryEntry name="s1">'
                   "<ssc:Real/></ssd:DictionaryEntry></ssd:SignalDictionary></ssd:SignalDictionaries>")
     text = {
@@ -166,16 +189,25 @@ def test_a_bad_ssp_is_one_clear_line(
         "no_interval": ssd(plain, ""),
         "missing_ssv": ssd(component("mass1", '<ssd:ParameterBinding source="resources/nope.ssv"/>'), ""),
         "signal_dictionary": ssd(plain, "").replace("</ssd:Connections>", "</ssd:Connections>" + dictionary),
-        "mapping_inline": ssd(component("mass1", '<ssd:ParameterBinding source="resources/m.ssv"><ssd:ParameterMapping>'
-                                                 f'<ssm:ParameterMapping xmlns:ssm="{SSM}" version="1.0">'
-                                                 '<ssm:MappingEntry source="mass" target="m"/></ssm:ParameterMapping>'
-                                                 "</ssd:ParameterMapping></ssd:ParameterBinding>"), ""),
-        "mapping_file": ssd(component("mass1", inline), ""),
+        "mapped_twice": ssd(component("mass1", from_file.format(twice)), ""),
+        "enumeration_mapping": ssd(component("mass1", from_file.format(
+            '<ssd:ParameterMapping source="resources/m.ssm"/>')), ""),
+        "no_map_entry": ssd(component("mass1", "<ssd:ParameterBinding><ssd:ParameterValues>"
+                                               f"{integer_set}</ssd:ParameterValues>{integer_map}"
+                                               "</ssd:ParameterBinding>"), ""),
+        "missing_ssm": ssd(component("mass1", from_file.format('<ssd:ParameterMapping source="resources/none.ssm"/>')),
+                           ""),
+        "in_the_fmu": ssd(component("mass1", '<ssd:ParameterBinding source="resources/m.ssv" sourceBase="component"/>'),
+                          ""),
+        "no_component": ssd(plain, "", system_bindings=from_file.format("")),
         "bad_implementation": ssd(component("mass1", "").replace("<ssd:Component ",
                                                                  '<ssd:Component implementation="Both" '), ""),
     }[case]
-    files = {"resources/m.ssv": parameter_set({"mass": 2.0}), "resources/m.ssm": ssm.replace(
-        "<ssm:ParameterMapping ", f'<ssm:ParameterMapping xmlns:ssm="{SSM}" ')}
+    enumerations = ('<ssm:MappingEntry source="mass" target="m"><ssc:EnumerationMappingTransformation>'
+                    '<ssc:MapEntry source="a" target="b"/></ssc:EnumerationMappingTransformation></ssm:MappingEntry>')
+    files = {"resources/m.ssv": parameter_set({"mass": 2.0}),
+             "resources/m.ssm": mapping(enumerations, inline=False).replace("<ssm:ParameterMapping ",
+                                                                           f'<ssm:ParameterMapping xmlns:ssc="{SSC}" ')}
     ssp = write_ssp(tmp_path / "system.ssp", text, fmus["mass2"], files)
     if case == "bad_companion":
         (tmp_path / "system.toml").write_text("[subsims.mass9.params]\nm = 2.0\n")
@@ -184,6 +216,58 @@ def test_a_bad_ssp_is_one_clear_line(
     assert phrase in str(err.value) and "\n" not in str(err.value)
     assert cosim_main(["run", str(ssp), "--quiet"]) == 2
     assert capsys.readouterr().err == f"cosim: {err.value}\n"
+
+
+def raw_params(raw: dict, name: str) -> dict:
+    return {k: v for k, v in raw["subsims"][name]["params"].items() if k != "fmu"}
+
+
+def test_the_systems_bindings_win_over_the_components_and_a_prefix_goes_before_each_name(
+    tmp_path: Path, fmus: dict[str, Path]
+) -> None:
+    """SSP: a binding on the system names <component>.<variable>; its values win over a component's own bindings;
+    among one element's bindings the later wins; a binding's prefix is put before every name of its set (a set of
+    bare names bound on the system with prefix 'mass2.' sets mass2's variables). System bindings were ignored
+    without a word, and the prefix was taken off names instead of put before them."""
+    own = f"<ssd:ParameterBinding><ssd:ParameterValues>{parameter_set({'m': 2.0, 'k': 3.0})}</ssd:ParameterValues>" \
+          "</ssd:ParameterBinding>"
+    on_system = ('<ssd:ParameterBinding source="resources/all.ssv"/>'
+                 '<ssd:ParameterBinding source="resources/bare.ssv" prefix="mass2."/>'
+                 '<ssd:ParameterBinding source="resources/later.ssv"/>')
+    files = {"resources/all.ssv": parameter_set({"mass1.m": 5.0, "mass2.m": 6.0, "mass2.k": 7.0}),
+             "resources/bare.ssv": parameter_set({"m": 8.0, "u0": 0.5}),
+             "resources/later.ssv": parameter_set({"mass2.u0": 0.25})}
+    text = ssd(component("mass1", own) + component("mass2", own), "", system_bindings=on_system)
+    (tmp_path / "system.toml").write_text(COMPANION)
+    raw = read_ssp(write_ssp(tmp_path / "system.ssp", text, fmus["mass2"], files))
+    assert raw_params(raw, "mass1") == {"m": 5.0, "k": 3.0}
+    assert raw_params(raw, "mass2") == {"m": 8.0, "k": 7.0, "u0": 0.25}
+
+
+@pytest.mark.parametrize("inline", [True, False])
+def test_a_parameter_mapping_renames_and_transforms_values(tmp_path: Path, fmus: dict[str, Path],
+                                                           inline: bool) -> None:
+    """MappingEntry source -> target, with a LinearTransformation (factor x value + offset) or a table of
+    booleans or integers; a name no entry lists keeps its name and value; inline or from an .ssm file."""
+    entries = ('<ssm:MappingEntry source="stiffness" target="k"><ssc:LinearTransformation factor="2" offset="1"/>'
+               '</ssm:MappingEntry><ssm:MappingEntry source="mass" target="m"/>'
+               '<ssm:MappingEntry source="on" target="flag"><ssc:BooleanMappingTransformation>'
+               '<ssc:MapEntry source="true" target="false"/><ssc:MapEntry source="false" target="true"/>'
+               "</ssc:BooleanMappingTransformation></ssm:MappingEntry>"
+               '<ssm:MappingEntry source="gear" target="n"><ssc:IntegerMappingTransformation>'
+               '<ssc:MapEntry source="1" target="10"/><ssc:MapEntry source="2" target="20"/>'
+               "</ssc:IntegerMappingTransformation></ssm:MappingEntry>")
+    rows = ('<ssv:Parameter name="on"><ssv:Boolean value="true"/></ssv:Parameter>'
+            '<ssv:Parameter name="gear"><ssv:Integer value="2"/></ssv:Parameter>')
+    values = parameter_set({"stiffness": 20.0, "mass": 1.5, "u0": 0.1}).replace("</ssv:Parameters>",
+                                                                                f"{rows}</ssv:Parameters>")
+    ssm = mapping(entries, inline=False).replace("<ssm:ParameterMapping ", f'<ssm:ParameterMapping xmlns:ssc="{SSC}" ')
+    how = mapping(entries) if inline else '<ssd:ParameterMapping source="resources/p.ssm"/>'
+    binding = f'<ssd:ParameterBinding source="resources/p.ssv">{how}</ssd:ParameterBinding>'
+    ssp = write_ssp(tmp_path / "system.ssp", ssd(component("mass1", binding), ""), fmus["mass2"],
+                    {"resources/p.ssv": values, "resources/p.ssm": ssm})
+    (tmp_path / "system.toml").write_text(COMPANION)
+    assert raw_params(read_ssp(ssp), "mass1") == {"k": 41.0, "m": 1.5, "u0": 0.1, "flag": False, "n": 20}
 
 
 def test_fmu_shorthand_resolves_against_the_scenario_and_refuses_model_too(tmp_path: Path,

@@ -18,6 +18,7 @@ pytestmark = [pytest.mark.slow]  # builds the test FMUs
 SSD = "http://ssp-standard.org/SSP1/SystemStructureDescription"
 SSC = "http://ssp-standard.org/SSP1/SystemStructureCommon"
 SSV = "http://ssp-standard.org/SSP1/SystemStructureParameterValues"
+SSM = "http://ssp-standard.org/SSP1/SystemStructureParameterMapping"
 COMPANION = "[coupling]\ninterval = 0.05\nsamples = 3\n"
 # the mass FMU's units, each with its SI definition (the built FMU names them without one)
 DEFINED = ('<Unit name="m"><BaseUnit m="1"/></Unit><Unit name="m/s"><BaseUnit m="1" s="-1"/></Unit>'
@@ -72,11 +73,12 @@ def connection(inner: str = "", suppress: bool = False) -> str:
 
 
 def write(tmp_path: Path, fmus: dict[str, Path], components: str, connections: str = "",
-          ssd_units: str = "", files: dict[str, str] | None = None) -> Path:
-    """``system.ssp`` with components a and b (``fmus``: name -> FMU file) and a companion TOML."""
+          ssd_units: str = "", files: dict[str, str] | None = None, system_bindings: str = "") -> Path:
+    """``system.ssp`` with components a and b (``fmus``: name -> FMU file) and a companion TOML;
+    ``system_bindings``: ParameterBinding elements of the system."""
     ssd = (f'<?xml version="1.0" encoding="UTF-8"?>\n<ssd:SystemStructureDescription xmlns:ssd="{SSD}" '
            f'xmlns:ssc="{SSC}" xmlns:ssv="{SSV}" version="1.0" name="units"><ssd:System name="top">'
-           f"<ssd:Elements>{components}</ssd:Elements><ssd:Connections>{connections}</ssd:Connections></ssd:System>"
+           f"<ssd:ParameterBindings>{system_bindings}</ssd:ParameterBindings><ssd:Elements>{components}</ssd:Elements><ssd:Connections>{connections}</ssd:Connections></ssd:System>"
            f"<ssd:Units>{ssd_units}</ssd:Units>"
            '<ssd:DefaultExperiment startTime="0" stopTime="0.1"/></ssd:SystemStructureDescription>')
     path = tmp_path / "system.ssp"
@@ -97,17 +99,35 @@ def params(raw: dict, name: str) -> dict:
 def test_a_parameter_value_with_a_unit_reaches_the_fmu_in_the_variables_unit(
     tmp_path: Path, fmus: dict[str, Path]
 ) -> None:
-    """m = 1000 g in an .ssv (g defined there) is 1.0 kg (the FMU got m = 1000 kg); u0 = 5 cm inline (cm defined
-    in the SSD's Units) is 0.05 m; a value in the variable's own unit passes as it is; one without a unit too."""
+    """m = 1000 g in an .ssv bound on the system (g defined there) is 1.0 kg (the FMU got m = 1000 kg); u0 = 5 cm
+    inline (cm defined in the SSD's Units) is 0.05 m; a value in the variable's own unit passes as it is; one
+    without a unit too."""
     fmu = variant(fmus, tmp_path / "a.fmu")
     ssv = parameters({"a.m": (1000.0, "g"), "a.k": (40.0, "N/m"), "a.v0": (2.0, None)})
     inline = ("<ssd:ParameterBinding><ssd:ParameterValues>" + parameters({"u0": (5.0, "cm")})
               + "</ssd:ParameterValues></ssd:ParameterBinding>")
-    bindings = '<ssd:ParameterBinding source="resources/a.ssv" prefix="a."/>' + inline
     cm = f'<ssc:Unit xmlns:ssc="{SSC}" name="cm"><ssc:BaseUnit m="1" factor="0.01"/></ssc:Unit>'
-    ssp = write(tmp_path, {"a": fmu}, component("a", bindings), ssd_units=cm, files={"resources/a.ssv": ssv})
+    ssp = write(tmp_path, {"a": fmu}, component("a", inline), ssd_units=cm, files={"resources/a.ssv": ssv},
+                system_bindings='<ssd:ParameterBinding source="resources/a.ssv"/>')
     assert params(read_ssp(ssp), "a") == {"m": 1.0, "k": 40.0, "v0": 2.0, "u0": 0.05}
     assert load(ssp).subsims["a"].params["m"] == 1.0
+
+
+@pytest.mark.parametrize(("suppress", "expected"), [(False, 2.0), (True, 2000.0)])
+def test_a_mapped_value_is_converted_to_its_target_variables_unit_before_the_transformation(
+    tmp_path: Path, fmus: dict[str, Path], suppress: bool, expected: float
+) -> None:
+    """mass = 1000 g mapped to m (kg) with factor 2: 1000 g is 1 kg, times 2 (SSP: the linear transformation comes
+    after the unit conversion); with suppressUnitConversion the value goes as it is given: 2 x 1000."""
+    flag = ' suppressUnitConversion="true"' if suppress else ""
+    entry = (f'<ssm:MappingEntry source="mass" target="m"{flag}><ssc:LinearTransformation factor="2"/>'
+             "</ssm:MappingEntry>")
+    ssm = f'<ssm:ParameterMapping xmlns:ssm="{SSM}" version="1.0">{entry}</ssm:ParameterMapping>'
+    binding = (f'<ssd:ParameterBinding source="resources/a.ssv"><ssd:ParameterMapping>{ssm}</ssd:ParameterMapping>'
+               "</ssd:ParameterBinding>")
+    ssp = write(tmp_path, {"a": variant(fmus, tmp_path / "a.fmu")}, component("a", binding),
+                files={"resources/a.ssv": parameters({"mass": (1000.0, "g")})})
+    assert params(read_ssp(ssp), "a") == {"m": expected}
 
 
 @pytest.mark.parametrize(
