@@ -173,19 +173,48 @@ def _models_in(module_name: str) -> list[str]:
 def code_digests(module: str) -> dict[str, str]:
     """The model code this process runs, as ``{module name: the first 16 hex digits of the SHA-256 of its file}``
     (line ends as LF: a Windows checkout is the same code): every module loaded here from the top-level package of
-    ``module`` (or ``module`` alone). A subsim's ``describe`` says it (``code``), and a coordinator compares it with
-    its own files of that package (:func:`differing_code`): a subsim moved to another machine with an older copy of
-    its package ran there without a word."""
+    ``module`` (or ``module`` alone), and from the directory that holds it, the model's project (a helper module
+    beside it, ``rk4.py``), unless that is where libraries are installed; cosim's own modules are not the model's.
+    A subsim's ``describe`` says it (``code``), and a coordinator compares it with its own files
+    (:func:`differing_code`): a subsim moved to another machine with an older copy of its package ran there without
+    a word."""
     top = module.partition(".")[0]
     if top == "__main__":  # a script's name, not its file: another process's __main__ is another script
         return {}
+    project = _project(getattr(sys.modules.get(top), "__file__", None))
     found = {}
     for name, loaded in list(sys.modules.items()):
-        if name == top or name.startswith(top + "."):
-            digest = _file_digest(getattr(loaded, "__file__", None))
-            if digest is not None:
-                found[name] = digest
+        path = getattr(loaded, "__file__", None)
+        ours = name == top or name.startswith(top + ".")
+        if not ours and (project is None or not isinstance(path, str) or not path.startswith(project)
+                         or _module_file(project, name) != os.path.abspath(path)):
+            continue  # (a module loaded from there under another name could not be found by its name elsewhere)
+        digest = _file_digest(path)
+        if digest is not None:
+            found[name] = digest
     return found
+
+
+def _project(top_file: str | None) -> str | None:
+    """The directory (ending in a separator) holding a top-level package (its ``__init__.py``) or module, unless
+    libraries are installed there."""
+    if not top_file:
+        return None
+    path = os.path.abspath(top_file)
+    base = os.path.dirname(os.path.dirname(path) if os.path.basename(path) == "__init__.py" else path) + os.sep
+    return None if base.startswith(_LIBRARIES) else base
+
+
+def _module_file(project: str, name: str) -> str | None:
+    """Where module ``name`` is under ``project`` (a module file or a package's ``__init__.py``), if it is there and
+    is no library's (cosim's own, a virtualenv inside the project)."""
+    parts = name.split(".")
+    if not all(part.isidentifier() for part in parts):
+        return None
+    for path in (os.path.join(project, *parts) + ".py", os.path.join(project, *parts, "__init__.py")):
+        if os.path.isfile(path):
+            return None if path.startswith(_LIBRARIES) else path
+    return None
 
 
 def _file_digest(path: str | None) -> str | None:
@@ -198,17 +227,19 @@ def _file_digest(path: str | None) -> str | None:
 
 
 def differing_code(code: Mapping[str, str], model: str) -> list[str]:
-    """The modules of ``code`` (another process's :func:`code_digests`) in the top-level package of ``model``
-    (``package.module[:Class]``) whose file on this machine differs. Files are looked up by name under where that
-    package is found on this machine's import path, nothing imported; modules not found here are not compared, nor
-    any of another package (the names come from the other process)."""
+    """The modules of ``code`` (another process's :func:`code_digests`) whose file on this machine differs: those of
+    the top-level package of ``model`` (``package.module[:Class]``) and of the directory that holds it here (its
+    project, as :func:`code_digests` takes it). Files are looked up by name where that package is found on this
+    machine's import path, nothing imported; modules not found there are not compared (the names come from the
+    other process)."""
     top = model.partition(":")[0].partition(".")[0]
     try:
         spec = importlib.util.find_spec(top) if top and top != "__main__" else None  # (a top-level name: no import)
     except (ImportError, ValueError):
         spec = None
-    if spec is None or not spec.has_location:
+    if spec is None or not spec.has_location or not spec.origin:
         return []
+    project = _project(spec.origin)
     roots = list(spec.submodule_search_locations or [])  # a package's directories; none for a lone module
     differ = []
     for name, digest in sorted(code.items()):
@@ -220,6 +251,8 @@ def differing_code(code: Mapping[str, str], model: str) -> list[str]:
                 continue
             path = next((str(p) for root in roots for p in (Path(root, *parts).with_suffix(".py"),
                                                               Path(root, *parts, "__init__.py")) if p.is_file()), None)
+        elif project is not None:
+            path = _module_file(project, name)
         else:
             continue
         mine = _file_digest(path)

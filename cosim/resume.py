@@ -98,6 +98,7 @@ class Saved:
     written: Mapping[str, Any] | None = None  # the results files' bytes and SHA-256 up to the point (ResultWriter)
     models: Mapping[str, str] | None = None  # SHA-256 of each file the subsims' parameters name (an FMU), by path
     scenario: Mapping[str, Any] | None = None  # what was fingerprinted (:func:`fingerprinted`), to say what changed
+    code: Mapping[str, Mapping[str, str]] | None = None  # each subsim's model code (Description.code), by subsim
 
 
 def save(path: Path, saved: Saved) -> None:
@@ -113,7 +114,7 @@ def save(path: Path, saved: Saved) -> None:
             "length": saved.point.length, "patience": saved.point.patience,
             "ceiling": None if math.isinf(saved.point.ceiling) else saved.point.ceiling,
             "subsims": {name: {"time": st.time, "model": st.model} for name, st in saved.states.items()},
-            "written": saved.written, "models": saved.models, "scenario": saved.scenario}
+            "written": saved.written, "models": saved.models, "scenario": saved.scenario, "code": saved.code}
     arrays["meta"] = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
 
     def write(f: io.BufferedIOBase) -> None:
@@ -146,7 +147,19 @@ def load(path: Path) -> Saved:
     point = ResumePoint(float(meta["t"]), meta["length"], previous, magnitudes,
                         math.inf if ceiling is None else float(ceiling), int(meta.get("patience", 0)))
     return Saved(meta["fingerprint"], float(meta["t_start"]), point, states, meta.get("written"), meta.get("models"),
-                 meta.get("scenario"))
+                 meta.get("scenario"), meta.get("code"))
+
+
+def changed_code(saved: Mapping[str, Mapping[str, str]], now: Mapping[str, Mapping[str, str]]) -> dict[str, list[str]]:
+    """By subsim, the modules of its model code (``Description.code``) whose file is another now than at the resume
+    point (modules loaded then and now: what else a process loads is no change of the model)."""
+    out = {}
+    for name, before in saved.items():
+        after = now.get(name, {})
+        differ = sorted(m for m in before.keys() & after.keys() if before[m] != after[m])
+        if differ:
+            out[name] = differ
+    return out
 
 
 def model_files(params: Mapping[str, Mapping[str, Any]]) -> dict[str, str]:

@@ -32,7 +32,7 @@ from cosim.protocol.security import Security
 from cosim.protocol.transport.client import NOT_APPEARED, NotAppeared, RemoteHandle
 from cosim.protocol.transport.session import split_endpoint
 from cosim.results import ResultWriter, diag_path, output_units
-from cosim.resume import Saved, changes, fingerprint, fingerprinted, model_files
+from cosim.resume import Saved, changed_code, changes, fingerprint, fingerprinted, model_files
 from cosim.resume import load as load_resume
 from cosim.resume import save as save_resume
 from cosim.scenario import RunSpec, Scenario, ScenarioError, SubsimSpec
@@ -320,16 +320,16 @@ AWAY_FLOOR = 10.0  # s: the shortest automatic deadline when a subsim is on anot
 # network blip shorter than that is waited out, not taken for a hang that costs a restart)
 
 
-def other_model(scenario: Scenario, name: str, served: str, refusal: str) -> None:
-    """ScenarioError when an external subsim that refused its parameters serves another class than its scenario's
-    ``model`` names (by class name: a package may re-export a class under a shorter path, or another name; so this is
-    said only of a subsim that refused): the operator started another model, which the refusal would blame on the
-    scenario."""
+def other_model(scenario: Scenario, name: str, served: str, refusal: str, what: str = "refused its params") -> None:
+    """ScenarioError when an external subsim that refused its parameters (or ``what`` else it refused) serves another
+    class than its scenario's ``model`` names (by class name: a package may re-export a class under a shorter path,
+    or another name; so this is said only of a subsim that refused): the operator started another model, which the
+    refusal would blame on the scenario."""
     model = scenario.subsims[name].model
     if model and served.rpartition(".")[2] != model.rpartition(":")[2].rpartition(".")[2]:
         raise ScenarioError(f"{scenario.path}: [subsims.{name}] model = {model!r}, but the process that attached as "
-                            f"{name!r} serves {served}, which refused its params ({refusal}): start it with the "
-                            "command printed for it")
+                            f"{name!r} serves {served}, which {what} ({refusal}): start it with the command printed "
+                            "for it")
 
 
 def attach(bus: Bus, scenario: Scenario, name: str, timeout: float, wait: float, not_appeared: str) -> RemoteHandle:
@@ -503,6 +503,12 @@ def build_plan(scenario: Scenario, descriptions: dict[str, Description], method:
     try:
         plan = plan_for(descriptions, scenario.couplings, scenario.settings_for(method))
     except CouplingError as exc:
+        coupling = scenario.couplings[exc.index] if 0 <= exc.index < len(scenario.couplings) else None
+        ends = [] if coupling is None else [coupling.target.subsim, *(s.subsim for s in coupling.sources)]
+        for name in dict.fromkeys(ends):  # another model attached: its ports are not the scenario's fault
+            if name in descriptions and scenario.subsims.get(name) is not None and scenario.subsims[name].external:
+                other_model(scenario, name, descriptions[name].model, f"[couplings[{exc.index}]] {exc}",
+                            "does not fit the couplings")
         raise ScenarioError(f"{scenario.path}: [couplings[{exc.index}]] {exc}") from None
     return replace(plan, held=MappingProxyType(held_inputs(scenario, descriptions)))
 
@@ -620,6 +626,11 @@ def run_scenario(
                 if models.get(path) != digest:
                     log(f"cosim: {path} is not the file the run had when its resume point at t = {saved.point.t:g} "
                         "was saved: the results before that point came from the earlier one")
+            now = {name: d.code for name, d in session.descriptions.items()}
+            for name, modules in changed_code(saved.code or {}, now).items():
+                shown = ", ".join(modules[:4]) + (f" and {len(modules) - 4} more" if len(modules) > 4 else "")
+                log(f"cosim: {name}'s code is not what the run had when its resume point at t = {saved.point.t:g} "
+                    f"was saved ({shown} changed since): the results before that point came from the earlier code")
         spec = scenario.run
         restarts = session.restarts_left  # (those a subsim lost while it started used are gone)
         recovery = None
@@ -632,7 +643,8 @@ def run_scenario(
         coordinator = Coordinator(session.handles, session.plans[method], settings, recovery=recovery,
                                   deadline=deadline, checkpoint_every=spec.checkpoint_every,
                                   on_checkpoint=None if lock is None else lambda point, states: checkpoints.append(
-                                      Saved(key, scenario.start, point, states, scenario=tables)))
+                                      Saved(key, scenario.start, point, states, scenario=tables, code={
+                                          name: d.code for name, d in session.descriptions.items()})))
         writer: ResultWriter | Unrecorded = Unrecorded() if lock is None else ResultWriter(
             output, output_signals(scenario, session.descriptions), output_units(session.descriptions), lock=lock,
             resume_at=None if saved is None else saved.point.t, written=None if saved is None else saved.written)

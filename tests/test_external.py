@@ -213,6 +213,29 @@ def test_an_external_subsim_serving_another_model_is_refused_naming_both(tmp_pat
     assert err.rstrip().endswith("start it with the command printed for it"), err
 
 
+@pytest.mark.parametrize("external", [True, False])
+def test_an_external_subsim_whose_ports_do_not_fit_is_named_as_another_model(tmp_path: Path, external: bool) -> None:
+    """Another model attached as mass2 that took mass2's params (a newcomer served the wall model as the free one):
+    the coupling check blamed the scenario, '[couplings[0]] ... has no input ...'. Now the run says which class
+    serves mass2; a subsim this run started is not named so (its model is the scenario's own: the ports are)."""
+    from cosim.handles import InProcessHandle
+    from cosim.runner import build_plan
+    from cosim.runtime import Runtime
+    from cosim.scenario import ScenarioError, load
+    from subsims.integrator.subsim import Integrator
+    from subsims.oscillator.subsim import Mass
+
+    scenario = load(external_scenario(tmp_path) if external else OSCILLATOR)
+    descriptions = {"mass1": InProcessHandle(Runtime(Mass(), "mass1")).describe(),
+                    "mass2": InProcessHandle(Runtime(Integrator(), "mass2")).describe()}
+    with pytest.raises(ScenarioError) as err:
+        build_plan(scenario, descriptions, "distributed")
+    served = "[subsims.mass2] model = 'subsims.oscillator.subsim:Mass', but the process that attached as 'mass2' " \
+             "serves subsims.integrator.subsim.Integrator, which does not fit the couplings ([couplings[0]] coupling"
+    assert (served in str(err.value)) is external, err.value
+    assert "[couplings[0]] coupling mass2.u -> mass1.F" in str(err.value) and "\n" not in str(err.value)
+
+
 @pytest.mark.parametrize("edited", [False, True], ids=["same-code", "edited-copy"])
 def test_an_external_subsim_running_other_code_than_this_machines_is_said(tmp_path: Path, procs: list,
                                                                           edited: bool) -> None:

@@ -283,6 +283,32 @@ def test_a_resume_with_another_file_a_parameter_names_goes_on_and_says_so(tmp_pa
                     "results before that point came from the earlier one"]
 
 
+def test_a_resume_with_other_model_code_goes_on_and_says_which_module_changed(tmp_path: Path) -> None:
+    """A model's helper module edited between the stop and the resume (a newcomer probe: the results jumped at the
+    resume point, nothing said; a parameter changed in the scenario is refused, so resume looked guarded). Going on
+    is right (fixing a model is a reason to resume); unnoticed is not."""
+    (tmp_path / "resumehelper.py").write_text("SCALE = 1.0\n")
+    (tmp_path / "resumemass.py").write_text("import resumehelper  # noqa: F401\n"
+                                            "from subsims.oscillator.subsim import Mass as _Mass\n\n\n"
+                                            "class Mass(_Mass):\n    pass\n")
+    text = OSCILLATOR.read_text().replace('"subsims.oscillator.subsim:Mass"', '"resumemass:Mass"')
+    (tmp_path / "s.toml").write_text(text)
+    sc = every(tmp_path / "s.toml", 10)
+    part = tmp_path / "part.csv"
+    with pytest.raises(Stop):
+        run_scenario(sc, stop=3.0, output=part, inprocess=True, progress=False, on_interval=stop_after(47))
+    said: list[str] = []
+    with pytest.raises(Stop):
+        run_scenario(sc, stop=3.0, output=part, inprocess=True, progress=False, resume=True, log=said.append,
+                     on_interval=stop_after(5))
+    assert said == []  # the same code
+    (tmp_path / "resumehelper.py").write_text("SCALE = 2.0\n")
+    run_scenario(sc, stop=3.0, output=part, inprocess=True, progress=False, resume=True, log=said.append)
+    assert said == [f"cosim: {name}'s code is not what the run had when its resume point at t = 2 was saved "
+                    "(resumehelper changed since): the results before that point came from the earlier code"
+                    for name in ("mass1", "mass2")]
+
+
 def test_what_changed_since_a_resume_point_is_shown_short_and_exact() -> None:
     """(red team) a long path changed after its 57th character, and 0.0 to -0.0, showed no change at all; a removed
     key showed as the string '(none)'; one edit in a long list printed the whole list."""
