@@ -52,7 +52,11 @@ def import_object(path: str, what: str, search_path: Sequence[str] = ()) -> Any:
         _take_own(module_name.partition(".")[0], search_path)
         module = importlib.import_module(module_name)
     except ImportError as exc:
-        raise ValueError(f"{what} {path!r} not found ({exc})") from None
+        missing = exc.name if isinstance(exc, ModuleNotFoundError) else None
+        if missing and (module_name == missing or module_name.startswith(missing + ".")):  # the module itself
+            raise ValueError(f"{what} {path!r} not found ({exc})") from None
+        # the module was found; an import in it failed (it said "not found" of a file that is there: a newcomer)
+        raise ValueError(f"{what} {path!r}: importing {module_name!r} raised {_where(exc)}") from None
     except Exception as exc:  # the module itself is broken (a syntax error, a NameError at import): say where
         raise ValueError(f"{what} {path!r}: importing {module_name!r} raised {_where(exc)}") from None
     try:
@@ -134,7 +138,7 @@ def _where(exc: Exception) -> str:
     if isinstance(exc, SyntaxError):
         return f"{type(exc).__name__}: {exc}"
     frames = traceback.extract_tb(exc.__traceback__)
-    last = frames[-1] if frames else None
+    last = own_frame(exc, skip=0) or (frames[-1] if frames else None)  # (an import fails in importlib's frames)
     return f"{type(exc).__name__}: {exc}" + (f" ({last.filename}, line {last.lineno})" if last else "")
 
 

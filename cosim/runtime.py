@@ -400,7 +400,8 @@ class Runtime:
             raise CosimError("model_error", f"advance() must return (outputs, end_state), got {got}")
         outputs, end_state = result
         checked = self._check_outputs(outputs, times)
-        end_state = self._check_state(end_state, state.size, "advance() returned end state", from_model=True)
+        end_state = self._check_state(end_state, state.size, f"the end state advance() returned over t in "
+                                      f"[{times[0]:g}, {times[-1]:g}]", from_model=True)
         if trial is not None:
             self._commit(trial)
         end = float(times[-1])
@@ -501,6 +502,8 @@ class Runtime:
         """``from_model``: a state ``advance()`` returned. Its faults are not the caller's but the model's:
         ``model_error``."""
         bad = "model_error" if from_model else "bad_value"
+        if state is None:  # (it read "must have shape 1-D, got ()", blaming the parameters: a newcomer probe)
+            raise CosimError(bad, f"{what} is None: a state is a 1-D array of floats (return it)")
         if getattr(getattr(state, "dtype", None), "kind", None) == "c":  # (a cast would drop the imaginary part)
             raise CosimError(bad, f"{what} is complex ({state.dtype}): a state is real numbers")
         try:
@@ -555,9 +558,10 @@ class Runtime:
 
     def _wrong_output_names(self, outputs: Mapping[str, Any]) -> None:
         missing = [k for k in self.outputs if k not in outputs]
-        if len(missing) == 1:
-            raise CosimError("model_error", f"advance() did not return output {missing[0]!r}")
         unknown = [k for k in outputs if k not in self.outputs]
+        if len(missing) == 1:  # (and the name it returned instead, a typo most likely: a newcomer probe)
+            instead = f" (it returned {', '.join(map(repr, unknown))} instead)" if unknown else ""
+            raise CosimError("model_error", f"advance() did not return output {missing[0]!r}{instead}")
         said = "did not return output(s) " + repr(missing) if missing else f"returned undeclared output(s) {unknown}"
         declared = ", ".join(f"{k}({p.size})" for k, p in self.outputs.items()) or "none"
         raise CosimError("model_error", f"advance() {said}; this subsim declares: {declared}")

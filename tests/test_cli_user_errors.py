@@ -175,6 +175,9 @@ def test_an_input_fed_by_no_coupling_is_refused_unless_held(tmp_path: Path) -> N
 @pytest.mark.parametrize(("source", "words"), [
     ("from cosim import Subsim\n\nclass Broken(Subsim)\n    pass\n", ["SyntaxError", "broken.py", "line 3"]),
     ("from cosim import Subsim\n\nSTEP = undefined_name\n", ["NameError", "undefined_name", "broken.py, line 3"]),
+    # an import in the module failing: it was "model 'broken:Broken' not found (No module named 'scipy.signall')",
+    # of a file that is there (a newcomer probe)
+    ("import math\nimport scipy.signall\n", ["ModuleNotFoundError", "scipy.signall", "broken.py, line 2"]),
 ])
 def test_a_broken_model_module_is_one_line_naming_its_file_and_line(tmp_path: Path, source: str,
                                                                    words: list[str]) -> None:

@@ -188,7 +188,7 @@ def test_a_bad_end_state_from_the_model_is_not_the_callers_fault(end_state, code
     before = committed(h)
     with pytest.raises(SubsimError) as err:
         h.run_interval(TIMES, ramp(TIMES))
-    assert err.value.code == code and "advance() returned end state" in err.value.message
+    assert err.value.code == code and "the end state advance() returned over t in [0, " in err.value.message
     assert committed(h) == before
     with pytest.raises(SubsimError, match="no_trial|commit without"):
         h.commit()
@@ -211,11 +211,13 @@ def test_a_bad_end_state_from_the_model_is_not_the_callers_fault(end_state, code
     (lambda n, out, end: ({"y": [[0.0, 1.0]] * (n - 1) + [[0.0]]}, end),
      "advance() output 'y' is not an array of numbers (ValueError: ..."),  # (then NumPy's own words)
     (lambda n, out, end: ({"y": out["y"] + 1j}, end), "advance() output 'y' is complex (complex128): outputs are real"),
-    (lambda n, out, end: (out, end + 0j), "advance() returned end state is complex (complex128): a state is real "
-     "numbers"),
+    (lambda n, out, end: (out, end + 0j), f"the end state advance() returned over t in [0, {TIMES[-1]:g}] is complex "
+     "(complex128): a state is real numbers"),
+    (lambda n, out, end: (out, None), "the end state advance() returned over t in [0, 0.4] is None: a state is a 1-D "
+     "array of floats (return it)"),
     (lambda n, out, end: ({**out, "yy": out["y"]}, end),
      "advance() returned undeclared output(s) ['yy']; this subsim declares: y(2)"),
-    (lambda n, out, end: ({"z": out["y"]}, end), "advance() did not return output 'y'"),
+    (lambda n, out, end: ({"z": out["y"]}, end), "advance() did not return output 'y' (it returned 'z' instead)"),
 ])
 def test_a_result_that_breaks_the_contract_is_the_models_error_and_changes_nothing(result, message: str) -> None:
     """Not ``internal`` (which reads as a fault of cosim's): the model's, naming what was wrong."""
@@ -352,3 +354,16 @@ def test_outputs_of_an_array_like_whose_dtype_is_not_numpys_are_taken() -> None:
     plain.configure({"size": 2})
     got, want = h.run_interval(TIMES, ramp(TIMES)), plain.run_interval(TIMES, ramp(TIMES))
     assert got.outputs["y"].tobytes() == want.outputs["y"].tobytes()
+
+
+def test_an_initial_state_of_none_is_said_as_such() -> None:
+    """It read 'initial_state() for these parameters gave a state that must have shape 1-D, got ()': the parameters
+    blamed for a forgotten return (a newcomer probe)."""
+    class Forgetful(Integrator):
+        def initial_state(self, params):
+            super().initial_state(params)
+
+    with pytest.raises(SubsimError) as err:
+        InProcessHandle(Forgetful()).configure({"size": 2})
+    assert "initial_state() for these parameters gave a state that is None: a state is a 1-D array of floats (return " \
+           "it)" in err.value.message, err.value.message
