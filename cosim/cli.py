@@ -9,6 +9,7 @@ import shlex
 import signal
 import sys
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 from pathlib import Path
 
 from cosim import __version__, interrupt
@@ -228,14 +229,19 @@ def _describe(args: argparse.Namespace) -> int:
         if not args.launch:
             raise UsageError("--listen is where the router of --launch listens: give --launch too")
         check_listen(args.listen)
-    session = open_session(scenario, inprocess=not args.launch, listen=args.listen,
+    shown = scenario
+    if not args.launch:  # a subsim served elsewhere is described from its model here, where the scenario names one
+        here = {n: replace(s, external=False, launcher=()) for n, s in scenario.subsims.items()
+                if (s.external or s.launcher) and s.model is not None}
+        shown = replace(scenario, subsims={**scenario.subsims, **here})
+    session = open_session(shown, inprocess=not args.launch, listen=args.listen,
                            log=lambda m: print(m, file=sys.stderr))
     try:
         print("subsims:")
         for name, d in session.descriptions.items():
             ins, outs = _ports(d.inputs), _ports(d.outputs)
             spec = scenario.subsims[name]
-            kind = "external" if spec.external else spec.model
+            kind = f"{spec.model}, external" if spec.external and spec.model else spec.model or "external"
             if spec.launcher:
                 kind += f", started with {shlex.join(spec.launcher)}"
             print(f"  {name} [{kind}]{' algebraic' if d.algebraic else ''}\n    in:  {ins or '-'}\n    out: {outs}")
@@ -347,7 +353,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("serve", help="serve a subsim class as a process (see python -m cosim.serve)")
     s.add_argument("model", help="package.module:Class")
-    s.add_argument("rest", nargs=argparse.REMAINDER, help="--connect ENDPOINT --run RUN [--name NAME]")
+    s.add_argument("rest", nargs=argparse.REMAINDER, metavar="OPTIONS", help="--connect ENDPOINT --run RUN [--name "
+                   "NAME] (python -m cosim.serve --help)")
     s.set_defaults(fn=_serve)
 
     pl = sub.add_parser("plot", help="plot result files to PNG")

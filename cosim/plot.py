@@ -56,6 +56,9 @@ class Result:
     def __init__(self, path: Path) -> None:
         if not path.exists():
             raise PlotError(f"result file {path} not found")
+        if path.suffix.lower() in {".toml", ".ssp", ".fmu", ".json"}:  # (NumPy's parse error said nothing useful)
+            raise PlotError(f"{path}: a {path.suffix} file, not results: plot the .csv or .npz a run wrote (cosim run "
+                            "prints where, after 'results:')")
         try:
             columns, data = read_results(path)
         except (ValueError, OSError, KeyError, StopIteration) as exc:
@@ -271,13 +274,14 @@ def plot_command(args: argparse.Namespace) -> int:
         print("\n".join(map(str, written)))
         return 0
     paths = [p for p in args.results if not p.name.endswith(SIDECARS)]  # `cosim plot results/*` works
-    for p in args.results:
-        if p not in paths:
-            print(f"cosim plot: skipping {p}, which belongs to a result file (given alone, a diagnostics file is "
-                  "plotted)", file=sys.stderr)
+    beside = [p for p in args.results if p not in paths]
+    owners = [p.with_name(p.name[:-len(next(s for s in SIDECARS if p.name.endswith(s)))]) for p in beside]
+    for p, owner in zip(beside, owners):
+        print(f"cosim plot: skipping {p}, which belongs to the results {owner} (a diagnostics file given alone is "
+              "plotted as such)", file=sys.stderr)
     try:
         if not paths:
-            raise PlotError("no result files given (only the diagnostics, units, locks or streams beside them)")
+            raise PlotError(f"no result files given (only files beside them): cosim plot {' '.join(map(str, owners))}")
         written = plot_files(paths, args.out, args.signals, getattr(args, "window", None))
     except (PlotError, OutputError) as exc:
         print(f"cosim plot: {exc}", file=sys.stderr)

@@ -186,6 +186,17 @@ def test_errors_are_reported(tmp_path: Path, capsys: pytest.CaptureFixture, monk
     bad.write_text("a,b\n1,2\n")
     assert cosim_main(["plot", str(bad), "--out", str(tmp_path)]) == 2
     assert "not a cosim result file" in capsys.readouterr().err
+    # a scenario, and a results file's units alone (a newcomer probe: NumPy's parse error; 'given alone, a
+    # diagnostics file is plotted')
+    scenario = tmp_path / "s.toml"
+    scenario.write_text('name = "x"\n')
+    assert cosim_main(["plot", str(scenario), "--out", str(tmp_path)]) == 2
+    assert capsys.readouterr().err == f"cosim plot: {scenario}: a .toml file, not results: plot the .csv or .npz a " \
+                                      "run wrote (cosim run prints where, after 'results:')\n"
+    units = generic_result(tmp_path / "r.csv").with_name("r.csv.meta.json")
+    assert cosim_main(["plot", str(units), "--out", str(tmp_path)]) == 2
+    assert capsys.readouterr().err.splitlines()[-1] == f"cosim plot: no result files given (only files beside them): " \
+                                                       f"cosim plot {tmp_path / 'r.csv'}"
     monkeypatch.setitem(sys.modules, "matplotlib", None)  # as if not installed
     assert cosim_main(["plot", str(generic_result(tmp_path / "a.csv")), "--out", str(tmp_path)]) == 2
     assert "pip install 'cosim[plot]'" in capsys.readouterr().err
