@@ -153,7 +153,8 @@ def _run_until_done(args: argparse.Namespace, state: dict) -> int:
     s = report.summary
     hist = ", ".join(f"{v} took {k} stage{'s' if k != 1 else ''}" for k, v in sorted(s.stages.items()))
     resumed = f" from its resume point at t = {s.t_start:.6g}" if args.resume else ""
-    lines = [f"{scenario.name} ({report.method}): {s.intervals} intervals{resumed} to t = {s.t_end:.6g} in "
+    plural = "s" if s.intervals != 1 else ""
+    lines = [f"{scenario.name} ({report.method}): {s.intervals} interval{plural}{resumed} to t = {s.t_end:.6g} in "
              f"{s.wall_time:.2f} s{f' ({hist})' if hist else ''}"]
     if report.method != "unified" and s.intervals:  # what the run cost in requests (rejected tries included)
         span = s.t_end - s.t_start

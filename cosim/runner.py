@@ -526,7 +526,8 @@ def held_inputs(scenario: Scenario, descriptions: dict[str, Description]) -> dic
         for port, values in given.items():
             p, ref = d.inputs.get(port), f"{name}.{port}"
             why = ("is no input" if p is None else "is fed by a coupling" if ref in coupled
-                   else f"takes {p.size} values, got {len(values)}" if len(values) != p.size else "")
+                   else f"takes {p.size} value{'s' if p.size != 1 else ''}, got {len(values)}"
+                   if len(values) != p.size else "")
             if why:
                 raise ScenarioError(f"{scenario.path}: [subsims.{name}.inputs.{port}] {ref} {why} "
                                     f"(inputs: {', '.join(d.inputs) or 'none'})")
@@ -602,6 +603,9 @@ def run_scenario(
     settings = scenario.settings_for(method)
     stop = scenario.stop if stop is None else stop
     check_resolution(scenario, settings, method, stop)
+    if settings.auto is None and stop - scenario.start < settings.interval:  # (a newcomer's interval = 500, stop = 100)
+        log(f"cosim: [coupling] interval = {settings.interval:g} s is longer than the run ({scenario.start:g} to "
+            f"{stop:g} s): it runs one whole interval, to t = {scenario.start + settings.interval:g}")
     output = Path(output) if output is not None else default_output(scenario, method)
     lock = reserve_output(output, overwrite or resume) if record else None  # locked before anything is launched
     key = fingerprint(scenario.raw, method)  # what a resume point of this run is saved under

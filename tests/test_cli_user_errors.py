@@ -365,3 +365,19 @@ def test_an_interval_so_long_that_the_iteration_diverges_says_so(tmp_path: Path,
                            str(tmp_path / "x.csv")], capture_output=True, text=True, timeout=120)
     assert done.returncode == 1 and words in done.stderr, done.stderr
     assert "Traceback" not in done.stderr
+
+
+def test_an_interval_longer_than_the_run_is_said(tmp_path: Path) -> None:
+    """interval = 500 with stop = 100 ran one interval to t = 500 and said nothing of it (a newcomer probe)."""
+    from cosim.runner import run_scenario
+    from cosim.scenario import load
+
+    said: list[str] = []
+    run_scenario(load(OSCILLATOR), stop=0.03, output=tmp_path / "x.csv", inprocess=True, progress=False,
+                 log=said.append)
+    assert said == ["cosim: [coupling] interval = 0.05 s is longer than the run (0 to 0.03 s): it runs one whole "
+                    "interval, to t = 0.05"]
+    said.clear()
+    run_scenario(load(OSCILLATOR), stop=0.05, output=tmp_path / "y.csv", inprocess=True, progress=False,
+                 log=said.append)
+    assert said == []

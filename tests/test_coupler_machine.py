@@ -243,6 +243,33 @@ def test_a_residual_stuck_at_the_round_off_of_its_signal_is_told_to_raise_res() 
     assert "to try: res = 1e-13" in str(err.value) and "values near 100" in str(err.value)
 
 
+@pytest.mark.parametrize("method", ["distributed", "centralized"])
+def test_an_iteration_cycling_in_its_last_bits_stops_before_max_stages(method: str) -> None:
+    """Residuals repeating exactly stage after stage (a newcomer's heater at 1.151e-12 for all of its 100 stages):
+    more stages change nothing, so the interval stops once 12 have repeated, with the same advice."""
+    from cosim.coupler.relaxation import CYCLE_STAGES, NotConverged, _cycling
+
+    plan = Plan.build({"y": {"u": 1}}, {"y": {"y": 1}}, [Coupling.make("y.u", "y.y", "gain", {"k": -1.0})], method)
+    steps = Relaxation(plan, settings(method, max_stages=100, max_halvings=0,
+                                      tol=Tolerance(0.0, 1e-15))).interval(0.0, 0.9)
+    action, flip, runs = steps.send(None), 0, 0
+    with pytest.raises(NotConverged) as err:
+        while True:
+            if isinstance(action, Rollback):
+                steps.send(None)
+            flip ^= 1
+            runs += 1
+            action = steps.send({"y": {"y": np.full((action.times.size, 1), 100.0 + flip * 5.7e-14)}})
+    assert runs == CYCLE_STAGES + 1 and err.value.stages == runs  # (the first stage has no residual)
+    assert "did not converge in 13 stages (its residuals repeat exactly, stage after stage: more stages would change " \
+           "nothing)" in str(err.value) and "to try: res = 1e-13" in str(err.value)
+    # not a cycle: a Jacobi pair's every-other-stage zeros with a residual that still moves, a slow contraction
+    assert not _cycling({"a.x": [0.0, 2e-12, 0.0, 2e-12, 0.0, 2e-12, 0.0, 2e-12, 0.0, 2e-12, 0.0, 1.9e-12]}, ["a.x"])
+    assert not _cycling({"a.x": [0.99 ** i for i in range(40)]}, ["a.x"])
+    assert _cycling({"a.x": [3e-12, 1e-12, 2e-12] * 4}, ["a.x"])  # a cycle of three subsims' order
+    assert not _cycling({"a.x": [1e-12] * 12, "b.y": [0.5 ** i for i in range(12)]}, ["a.x", "b.y"])  # one still moves
+
+
 # every stage of the failing signals of the FMU oscillator with both masses in model exchange (rtol 1e-10) and
 # res = 1e-12, measured (two significant digits): centralized (a Jacobi pair: every other stage 0) and distributed
 ME_CENTRALIZED_V = [3.1, 0.0, 0.00011, 0.0, 1.3e-08, 0.0, 1.4e-08, 0.0, 1.4e-08, 0.0, 1.7e-08, 0.0, 9.7e-09, 0.0,

@@ -108,3 +108,25 @@ def test_a_transform_failing_inside_numpy_is_located_in_its_own_code() -> None:
     c = Coupling(c.target, c.sources, reshaping, {}, "xf:reshaping")
     with pytest.raises(ValueError, match=r"\(ValueError at test_couplings_evaluate\.py:\d+\)$"):
         c.evaluate(_outputs(np.ones((5, 3))), 3, 5)
+
+
+def test_a_transform_making_nan_from_finite_sources_is_told_its_own_arithmetic() -> None:
+    """A user transform dividing by zero was told 'as a coupling iteration that diverges makes them: a shorter
+    [coupling] interval then' (a newcomer probe): its sources were finite and small, the transform is to look at."""
+    from cosim.coupler.couplings import SignalRef
+
+    def boom(y: np.ndarray, k: float) -> np.ndarray:
+        with np.errstate(over="ignore"):
+            return y * k
+
+    def coupling(k: float) -> Coupling:
+        return Coupling(SignalRef.parse("b.u"), (SignalRef.parse("a.y"),), boom, {"k": k}, "mine:boom")
+
+    c = coupling(np.inf)
+    with pytest.raises(ValueError) as err:
+        c.evaluate(_outputs(np.full((5, 3), 2.5)), 3, 5)
+    assert str(err.value).endswith("produced NaN or inf from finite sources of at most 2.5 in size: its own "
+                                   "arithmetic (a division by zero?)"), err.value
+    with pytest.raises(ValueError, match=r"diverges makes them: a shorter \[coupling\] interval then; its sources "
+                                         r"reached 1e\+300\)$"):
+        coupling(1e10).evaluate(_outputs(np.full((5, 3), 1e300)), 3, 5)

@@ -78,8 +78,14 @@ class Coupling:
             name = self.transform_name
             raise TransformError(f"coupling {self}: transform {name!r} gave shape {value.shape}, need ({n}, {size})")
         if np.count_nonzero(np.isfinite(value)) != value.size:  # not .all(): its Python wrapper costs more
-            raise TransformError(f"coupling {self}: transform {self.transform_name!r} produced NaN or inf (as a "
-                                 "coupling iteration that diverges makes them: a shorter [coupling] interval then)")
+            largest = max((float(np.max(np.abs(a), initial=0.0)) for a in args), default=0.0)  # (NaN: not finite)
+            if not largest <= HUGE:
+                raise TransformError(f"coupling {self}: transform {self.transform_name!r} produced NaN or inf (as a "
+                                     "coupling iteration that diverges makes them: a shorter [coupling] interval "
+                                     f"then; its sources reached {largest:.3g})")
+            raise TransformError(f"coupling {self}: transform {self.transform_name!r} produced NaN or inf from "
+                                 f"finite sources of at most {largest:.3g} in size: its own arithmetic (a division "
+                                 "by zero?)")
         return value
 
     def as_table(self) -> dict[str, Any]:
@@ -92,6 +98,7 @@ class Coupling:
 
 
 Ports = Mapping[str, Mapping[str, int]]  # subsim -> port -> width
+HUGE = 1e100  # sources this large made a transform's NaN or inf: a diverging iteration (subsims' outputs are finite)
 
 
 def _raised_at(exc: BaseException) -> str:

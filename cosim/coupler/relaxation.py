@@ -184,9 +184,11 @@ class RunSummary:
 
 class NotConverged(RuntimeError):
     def __init__(self, t0: float, t1: float, stages: int, failing: list[str], residuals: dict[str, list[float]],
-                 values: Mapping[str, np.ndarray] | None = None):
-        """``values``: the failing signals' last samples, to tell a residual that is their round-off."""
-        lines = [f"interval [{t0!r}, {t1!r}] did not converge in {stages} stages; failing signals:"]
+                 values: Mapping[str, np.ndarray] | None = None, cycled: bool = False):
+        """``values``: the failing signals' last samples, to tell a residual that is their round-off. ``cycled``:
+        stopped before max_stages, the residuals repeating exactly (:func:`_cycling`)."""
+        why = " (its residuals repeat exactly, stage after stage: more stages would change nothing)" if cycled else ""
+        lines = [f"interval [{t0!r}, {t1!r}] did not converge in {stages} stages{why}; failing signals:"]
         for name in failing:
             hist = ", ".join(f"{r:.3e}" for r in residuals[name][-8:])
             lines.append(f"  {name}: residual by stage (last {min(8, len(residuals[name]))}) [{hist}]")
@@ -252,6 +254,22 @@ def _roundoff(failing: Sequence[str], residuals: Mapping[str, list[float]], valu
         found.append((level, name, size))
     level, name, size = max(found)
     return name, level, size
+
+
+CYCLE_STAGES = 12  # residuals repeating exactly over this many stages, with a period of at most CYCLE_PERIOD: a cycle
+CYCLE_PERIOD = 4
+
+
+def _cycling(history: Mapping[str, list[float]], failing: Sequence[str]) -> bool:
+    """Whether every failing signal's residuals over its last ``CYCLE_STAGES`` stages repeat exactly with a period of
+    at most ``CYCLE_PERIOD`` stages (a Gauss-Seidel or Jacobi iteration cycling in the last bits of its values, as a
+    gain makes of them): it goes on so to max_stages (a newcomer's run stood at 1.151e-12 for 100 stages)."""
+    for name in failing:
+        r = history.get(name, [])[-CYCLE_STAGES:]
+        if len(r) < CYCLE_STAGES or not any(all(r[i] == r[i - p] for i in range(p, len(r)))
+                                            for p in range(1, CYCLE_PERIOD + 1)):
+            return False
+    return bool(failing)
 
 
 HOVER_STAGES = 32  # stages of a residual going up and down with no trend, a small part of the values: noise
@@ -689,6 +707,9 @@ class Relaxation:
                     return Interval(times, outputs, inputs, stage + 1, history)
                 if self._give_up_early and _diverging(history, result.failing):  # retried shorter: no use going on
                     raise NotConverged(float(times[0]), float(times[-1]), stage + 1, result.failing, history)
+                if _cycling(history, result.failing):
+                    raise NotConverged(float(times[0]), float(times[-1]), stage + 1, result.failing, history, flat,
+                                       cycled=True)
             last_stage = flat
             inputs = {k: c.evaluate(outputs, w, n) for k, c, w in self._all}
         raise NotConverged(float(times[0]), float(times[-1]), s.max_stages, result.failing, history, last_stage)
@@ -737,6 +758,9 @@ class Relaxation:
                     return Interval(times, outputs, inputs, stage + 1, history)
                 if self._give_up_early and _diverging(history, result.failing):  # retried shorter: no use going on
                     raise NotConverged(float(times[0]), float(times[-1]), stage + 1, result.failing, history)
+                if _cycling(history, result.failing):
+                    raise NotConverged(float(times[0]), float(times[-1]), stage + 1, result.failing, history, new,
+                                       cycled=True)
             fed_back = new
         raise NotConverged(float(times[0]), float(times[-1]), s.max_stages, result.failing, history, fed_back)
 
