@@ -115,6 +115,7 @@ def save(path: Path, saved: Saved) -> None:
             "ceiling": None if math.isinf(saved.point.ceiling) else saved.point.ceiling,
             "subsims": {name: {"time": st.time, "model": st.model} for name, st in saved.states.items()},
             "written": saved.written, "models": saved.models, "scenario": saved.scenario, "code": saved.code}
+    meta["digest"] = _digest(meta, arrays)
     arrays["meta"] = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
 
     def write(f: io.BufferedIOBase) -> None:
@@ -139,15 +140,30 @@ def load(path: Path) -> Saved:
             previous = {k.removeprefix("previous/"): (z[f"previous_t/{k.removeprefix('previous/')}"], z[k])
                         for k in z.files if k.startswith("previous/")}
             magnitudes = {k.removeprefix("magnitude/"): z[k] for k in z.files if k.startswith("magnitude/")}
+            digest = meta.pop("digest", None)  # (absent from points saved before it was kept)
+            edited = digest is not None and digest != _digest(meta, {k: z[k] for k in z.files if k != "meta"})
     except Exception as exc:  # whatever a cut or damaged file makes zipfile or numpy raise
         why = " ".join(str(exc).split())[:120]
         raise OutputError(f"{path} is damaged or not a resume point ({type(exc).__name__}: {why}): run it again "
                           "from the start with --overwrite") from None
+    if edited:  # a state or a coupler's signal changed by hand or on disk: the results would differ without a word
+        raise OutputError(f"{path} is not as its run saved it (its contents do not match the SHA-256 saved with them: "
+                          "edited or damaged since): run it again from the start with --overwrite")
     ceiling = meta.get("ceiling")  # (absent from points saved before it was kept)
     point = ResumePoint(float(meta["t"]), meta["length"], previous, magnitudes,
                         math.inf if ceiling is None else float(ceiling), int(meta.get("patience", 0)))
     return Saved(meta["fingerprint"], float(meta["t_start"]), point, states, meta.get("written"), meta.get("models"),
                  meta.get("scenario"), meta.get("code"))
+
+
+def _digest(meta: Mapping[str, Any], arrays: Mapping[str, np.ndarray]) -> str:
+    """SHA-256 of a resume point's contents: its metadata (but the digest) and every array, by name."""
+    h = hashlib.sha256(json.dumps({k: v for k, v in meta.items() if k != "digest"}, sort_keys=True).encode())
+    for name in sorted(arrays):
+        a = np.ascontiguousarray(arrays[name])
+        h.update(f"\0{name}\0{a.dtype.str}\0{a.shape}\0".encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
 
 
 def changed_code(saved: Mapping[str, Mapping[str, str]], now: Mapping[str, Mapping[str, str]]) -> dict[str, list[str]]:

@@ -164,6 +164,38 @@ def test_damaged_files_are_refused_in_one_line_and_left_as_they_are(tmp_path: Pa
     assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
 
 
+@pytest.mark.parametrize("edit", ["state one ulp", "coupler signal removed", "point's time"])
+def test_a_resume_point_edited_into_another_valid_one_is_refused(tmp_path: Path, edit: str) -> None:
+    """A resume point rewritten with a state one ulp off, or a coupler signal left out, was resumed from without a
+    word, and the results differed from an uninterrupted run's (a red team); its time changed blamed the CSV."""
+    sc = every(OSCILLATOR, 10)
+    out = tmp_path / "x.csv"
+    with pytest.raises(Stop):
+        run_scenario(sc, stop=3.0, output=out, inprocess=True, progress=False, on_interval=stop_after(47))
+    point = resume_path(out)
+    with np.load(point) as z:
+        arrays = {k: z[k] for k in z.files}
+    if edit == "state one ulp":
+        arrays["state/mass1"] = np.nextafter(arrays["state/mass1"], np.inf)
+    elif edit == "coupler signal removed":
+        name = next(k for k in arrays if k.startswith("previous/"))
+        del arrays[name], arrays[name.replace("previous/", "previous_t/")]
+    else:
+        import json
+
+        meta = json.loads(bytes(arrays["meta"]).decode())
+        meta["t"] = 1.0
+        arrays["meta"] = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
+    with open(point, "wb") as f:
+        np.savez(f, **arrays)
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    with pytest.raises(OutputError) as err:
+        run_scenario(sc, stop=3.0, output=out, inprocess=True, progress=False, resume=True)
+    assert str(err.value) == f"{point} is not as its run saved it (its contents do not match the SHA-256 saved with " \
+                             "them: edited or damaged since): run it again from the start with --overwrite"
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
+
+
 def test_an_atomic_write_cut_short_leaves_nothing_for_long(tmp_path: Path) -> None:
     """A SIGKILL while a resume point (or an NPZ) was being written left ``.<file>.tmp-<pid>`` for good: the next run
     on that output, holding its lock, removes them."""
