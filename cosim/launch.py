@@ -455,6 +455,9 @@ class Bus:
         self.close()
 
 
+NOT_UP = "did not come up within"  # (a started process that never answered: cosim.runner starts it again)
+
+
 def _wait_ready_or_exit(handle: RemoteHandle, popen: subprocess.Popen, wait: float,
                         elsewhere: Elsewhere | None = None, relay: StderrRelay | None = None) -> None:
     deadline = time.monotonic() + wait
@@ -467,4 +470,4 @@ def _wait_ready_or_exit(handle: RemoteHandle, popen: subprocess.Popen, wait: flo
             return
     how = "" if elsewhere is None else (f" (its launcher {elsewhere.shown!r} still runs: does it "
                                         "wait for a password or a host key?)")
-    raise SubsimError("no_responder", f"did not come up within {wait:g} s{how}", handle.name, "spawn")
+    raise SubsimError("no_responder", f"{NOT_UP} {wait:g} s{how}", handle.name, "spawn")

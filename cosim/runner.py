@@ -25,7 +25,7 @@ from cosim.coupler.relaxation import Interval, RunSummary, Settings
 from cosim.driver import Abandoned, Coordinator, Deadline, Recovery, plan_for
 from cosim.handles import Description, InProcessHandle, SubsimHandle
 from cosim.importing import differing_code
-from cosim.launch import PRIVATE, UNSPECIFIED_HOSTS, Bus, Elsewhere, SubsimProcess, endpoint_for
+from cosim.launch import NOT_UP, PRIVATE, UNSPECIFIED_HOSTS, Bus, Elsewhere, SubsimProcess, endpoint_for
 from cosim.outputs import OutputError, reserve_output, resume_path
 from cosim.progress import Progress
 from cosim.protocol.security import Security
@@ -271,9 +271,11 @@ def open_session(
 
 def _may_start_again(session: Session, exc: SubsimError, name: str) -> bool:
     """Whether subsim ``name``'s process, started on this machine, which ``exc`` says was killed by a signal (a
-    crash, the OOM killer; not an exit of its own, which would come again), is to be started again: it counts as
-    one of the run's restarts (``session.restarts_left``)."""
-    if (exc.code != "no_responder" or "killed by SIG" not in exc.message or session.restarts_left <= 0
+    crash, the OOM killer; not an exit of its own, which would come again) or did not come up while it ran (stopped,
+    or hung as it started: a red team's SIGSTOP stopped the run with restarts left), is to be started again: it
+    counts as one of the run's restarts (``session.restarts_left``)."""
+    lost = "killed by SIG" in exc.message or exc.message.startswith(NOT_UP)
+    if (exc.code != "no_responder" or not lost or session.restarts_left <= 0
             or session.scenario.subsims[name].launcher):  # (over ssh a kill reads as an exit code)
         return False
     session.restarts_left -= 1

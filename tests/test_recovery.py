@@ -571,6 +571,39 @@ class Fragile(Mass):
 """
 
 
+HANGS_ONCE = """
+import time
+from pathlib import Path
+from subsims.oscillator.subsim import Mass
+
+MARK = Path(__file__).with_name("hung")
+
+
+class Slow(Mass):
+    def __init__(self):
+        if not MARK.exists():  # the first process stands still before it can answer (a SIGSTOP, a stuck licence call)
+            MARK.touch()
+            time.sleep(3600)
+        super().__init__()
+"""
+
+
+def test_a_subsim_that_does_not_come_up_is_started_again(tmp_path: Path) -> None:
+    """A launched subsim that stood still as it started (a red team's SIGSTOP of over 20 s) stopped the run, "did
+    not come up within 20 s", with restarts left: it is killed and started again, within the run's restarts."""
+    (tmp_path / "slow.py").write_text(HANGS_ONCE)
+    sc = tmp_path / "s.toml"
+    sc.write_text(OSCILLATOR.read_text().replace('model = "subsims.oscillator.subsim:Mass"', 'model = "slow:Slow"', 1))
+    said: list[str] = []
+    run_scenario(load(OSCILLATOR), stop=0.2, output=tmp_path / "calm.csv", progress=False, log=said.append)
+    run_scenario(load(sc), stop=0.2, output=tmp_path / "x.csv", progress=False, log=said.append, restarts=1)
+    assert (tmp_path / "hung").exists()
+    assert [m for m in said if "lost while starting" in m] == [
+        "cosim: mass1 was lost while starting (did not come up within 20 s); starting it again (0 more restarts in "
+        "this run at most)"]
+    assert (tmp_path / "x.csv").read_bytes() == (tmp_path / "calm.csv").read_bytes()
+
+
 @pytest.mark.parametrize("where", ["start", "configure"])
 def test_a_subsim_killed_while_it_starts_is_started_again(tmp_path: Path, where: str) -> None:
     """A launched subsim killed by a signal before it answered, or while it was configured, stopped the run at once
