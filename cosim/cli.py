@@ -46,7 +46,14 @@ def _run(args: argparse.Namespace) -> int:
         if state["t"] is not None and state["output"] is not None:
             point = _resume_time(Path(state["output"]))
             kept = _kept(Path(state["output"]))
-            if point is not None and kept is not None:  # (a results file removed meanwhile is not there to go on)
+            stop = state.get("stop")
+            if kept is not None and stop is not None and state["t"] >= stop - 1e-9 * max(1.0, abs(stop)):
+                # every interval is in: only the results' last step failed (an NPZ built from its stream); a resume
+                # point would be refused, "nothing to resume" (a red team)
+                resume_path(Path(state["output"])).unlink(missing_ok=True)
+                exc.add_note(f"every interval to t = {state['t']:.6g} s, the run's stop, is in {kept}: nothing is "
+                             "left to run")
+            elif point is not None and kept is not None:  # (a results file removed meanwhile is not there to go on)
                 exc.add_note(f"every interval to t = {state['t']:.6g} s is in {kept}; once that is fixed, the same "
                              f"command {_with_resume(args)} goes on from t = {point:.6g} s")
             elif kept is not None:  # no resume point yet: the same command alone would refuse the file it left
@@ -393,7 +400,10 @@ def main(argv: Sequence[str] | None = None, parsed: Callable[[], None] | None = 
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit
         return 141  # 128 + SIGPIPE, as a program killed by the signal
     except OutputWriteError as exc:  # the run stopped; its files end at the last whole interval
-        _say_stopped(exc)
+        if args.fn is _recover:  # (no run to stop: "run stopped" read oddly of cosim recover on a full disk)
+            say(f"cosim: {exc}")
+        else:
+            _say_stopped(exc)
         return 1
     except (ScenarioError, OutputError, UsageError) as exc:
         say(f"cosim: {exc}")

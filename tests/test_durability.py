@@ -992,3 +992,27 @@ def test_a_failed_fsync_stops_the_run_before_a_resume_point_names_those_rows(tmp
     with pytest.raises(OutputWriteError, match=r"Input/output error .*\(results, when its rows were made durable\)"):
         run_scenario(load(scenario), stop=1.0, output=out, inprocess=True, progress=False, log=lambda s: None)
     assert not resume_path(out).exists()
+
+
+def test_an_npz_that_cannot_be_built_at_the_runs_end_is_told_to_recover_not_resume(tmp_path: Path, monkeypatch,
+                                                                                     capsys) -> None:
+    """Disk full as the NPZ was built from its stream after the last interval: the run said '--resume goes on from
+    t = 40 s', which then refused, 'nothing to resume' (a red team). Every interval is in the stream: recover."""
+    import cosim.results
+    from cosim.cli import main as cosim_main
+    from cosim.outputs import OutputWriteError, resume_path
+
+    def full(path, *args):
+        raise OutputWriteError(f"disk full writing {path}")
+
+    monkeypatch.setattr(cosim.results, "write_npz", full)
+    out = tmp_path / "x.npz"
+    sc = tmp_path / "s.toml"  # a resume point every 2 intervals: the last one at the stop
+    sc.write_text(OSCILLATOR.read_text() + "\n[run]\ncheckpoint_every = 2\n")
+    assert cosim_main(["run", str(sc), "--stop", "0.5", "--output", str(out), "--inprocess", "--quiet"]) == 1
+    err = capsys.readouterr().err.splitlines()
+    assert err[-1] == (f"cosim: every interval to t = 0.5 s, the run's stop, is in {stream_path(out)} (`cosim recover "
+                       f"{out}` builds the NPZ from it): nothing is left to run"), err
+    assert not any("--resume" in line for line in err) and not resume_path(out).exists()
+    monkeypatch.undo()
+    assert cosim_main(["recover", str(out)]) == 0 and out.exists()
