@@ -254,8 +254,9 @@ class AppendFile:
         except OSError as exc:
             self.cut(start)
             where = ends_at()
+            free = "free space or " if exc.errno in (errno.ENOSPC, errno.EDQUOT) else ""  # (not for a read-only file)
             raise OutputWriteError(f"{failure_reason(exc)} writing {self.path} ({self.what})"
-                                   f"{': ' + where if where else ''}; free space or choose another --output, then run "
+                                   f"{': ' + where if where else ''}; {free}choose another --output, then run "
                                    "again") from None
         if os.fstat(self.fd).st_nlink == 0:  # written to a file no name reaches any more: lost at close
             self.size = start

@@ -26,7 +26,7 @@ from cosim.driver import Abandoned, Coordinator, Deadline, Recovery, plan_for
 from cosim.handles import Description, InProcessHandle, SubsimHandle
 from cosim.importing import differing_code
 from cosim.launch import NOT_UP, PRIVATE, UNSPECIFIED_HOSTS, Bus, Elsewhere, SubsimProcess, endpoint_for
-from cosim.outputs import OutputError, reserve_output, resume_path
+from cosim.outputs import OutputError, OutputWriteError, reserve_output, resume_path
 from cosim.progress import Progress
 from cosim.protocol.security import Security
 from cosim.protocol.transport.client import NOT_APPEARED, NotAppeared, RemoteHandle
@@ -656,6 +656,8 @@ def run_scenario(
             resume_at=None if saved is None else saved.point.t, written=None if saved is None else saved.written)
         bar = Progress(scenario.start if saved is None else saved.point.t, stop, enabled=progress)
 
+        unsaved: list[float] = []  # the times of resume points that could not be saved
+
         def each(interval: Interval) -> Iterator[None]:  # in steps: the coordinator writes while it waits
             try:
                 yield from writer.write_steps(interval)
@@ -663,8 +665,16 @@ def run_scenario(
                     while checkpoints and writer.t_last is not None and checkpoints[0].point.t <= writer.t_last:
                         writer.sync()  # (a point saved, fsynced, before the rows it names are on disk: a power cut
                         point = checkpoints.pop(0)  # would leave a point whose files the resume refuses)
-                        save_resume(resume_path(output), replace(point, written=writer.written(point.point.t),
-                                                                 models=models))
+                        try:
+                            save_resume(resume_path(output), replace(point, written=writer.written(point.point.t),
+                                                                     models=models))
+                        except OutputWriteError as exc:  # the results still go on: only a later --resume loses
+                            if not unsaved:  # (a read-only directory stopped the run, results writable: a red team)
+                                why = str(exc).removesuffix(", then run again")  # (this run goes on)
+                                log(f"cosim: the resume point at t = {point.point.t:g} could not be saved ({why}); "
+                                    "the run goes on, and an interrupted run goes on (--resume) from the last point "
+                                    "saved, if any")
+                            unsaved.append(point.point.t)
             except interrupt.Interrupted:  # a signal held back while the interval was written: it is in the files
                 if on_interval is not None and writer.holds(interval):
                     on_interval(interval)

@@ -1016,3 +1016,33 @@ def test_an_npz_that_cannot_be_built_at_the_runs_end_is_told_to_recover_not_resu
     assert not any("--resume" in line for line in err) and not resume_path(out).exists()
     monkeypatch.undo()
     assert cosim_main(["recover", str(out)]) == 0 and out.exists()
+
+
+def test_a_resume_point_that_cannot_be_saved_does_not_stop_the_run(tmp_path: Path, monkeypatch) -> None:
+    """The output directory made immutable mid-run (chattr +i): the results file, open, could still be written, but
+    the resume point could not, and the run stopped (a red team). It goes on, said once; the results are whole."""
+    import cosim.runner
+    from cosim.outputs import OutputWriteError, resume_path
+    from cosim.runner import run_scenario
+    from cosim.scenario import load, parse
+
+    saved = cosim.runner.save_resume
+    calls: list[float] = []
+
+    def refused(path, point):
+        calls.append(point.point.t)
+        if len(calls) == 1:
+            return saved(path, point)  # the first is saved; the directory is locked after it
+        raise OutputWriteError(f"Operation not permitted writing {path}; choose another place, then run again")
+
+    base = load(OSCILLATOR)
+    sc = parse({**base.raw, "run": {"checkpoint_every": 5}}, base.path)
+    run_scenario(sc, stop=0.5, output=tmp_path / "calm.csv", inprocess=True, progress=False)
+    monkeypatch.setattr(cosim.runner, "save_resume", refused)
+    said: list[str] = []
+    run_scenario(sc, stop=0.5, output=tmp_path / "x.csv", inprocess=True, progress=False, log=said.append)
+    assert len(calls) == 2 and said == [
+        f"cosim: the resume point at t = 0.5 could not be saved (Operation not permitted writing "
+        f"{resume_path(tmp_path / 'x.csv')}; choose another place); the run goes on, and an interrupted run goes on "
+        "(--resume) from the last point saved, if any"]
+    assert (tmp_path / "x.csv").read_bytes() == (tmp_path / "calm.csv").read_bytes()
