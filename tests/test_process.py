@@ -368,6 +368,50 @@ def test_a_subsim_that_timed_out_is_killed_at_once_when_stopped(cosim_bus: Bus) 
     assert proc.stop() == -signal.SIGKILL
 
 
+def test_a_stopped_subsim_is_killed_at_once_and_the_bus_stops_its_processes_side_by_side(
+        cosim_bus: Bus, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A subsim stopped with SIGSTOP (not known to be hung: no request missed a deadline) was asked to shut down, then
+    sent SIGTERM, each with its grace: Ctrl-C took 8-9 s, 15 s with two (a red team). It is killed at once, and a
+    bus stops its processes side by side."""
+    import os
+    import threading
+
+    from cosim.launch import SubsimProcess, _stopped
+
+    proc = cosim_bus.spawn("subsims.integrator", "frozen", timeout=5.0)
+    asked: list[str] = []
+    monkeypatch.setattr(proc.handle, "shutdown", lambda: asked.append("shutdown"))
+    os.kill(proc.popen.pid, signal.SIGSTOP)
+    deadline = time.monotonic() + 5.0
+    while not _stopped(proc.popen.pid) and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert _stopped(proc.popen.pid)
+    assert proc.stop() == -signal.SIGKILL and asked == []  # not asked: it could not answer
+    assert not _stopped(os.getpid())
+    # two processes slow to stop: the second is asked before the first is done
+    events: list[tuple[str, str]] = []
+    lock = threading.Lock()
+
+    def slow(self: SubsimProcess, grace: float = 3.0) -> int:
+        with lock:
+            events.append(("start", self.name))
+        time.sleep(0.5)
+        with lock:
+            events.append(("end", self.name))
+        return 0
+
+    for name in ("a", "b"):
+        cosim_bus.spawn("subsims.integrator", name, timeout=5.0)
+    spawned = list(cosim_bus.processes)
+    monkeypatch.setattr(SubsimProcess, "stop", slow)
+    cosim_bus.close()
+    assert [e[0] for e in events][:2] == ["start", "start"], events
+    for p in spawned:  # (the stand-in stopped none of them)
+        p.popen.kill()
+        p.popen.wait()
+        p.handle.close()
+
+
 def test_the_installed_eclipse_zenoh_is_read_as_pip_records_it() -> None:
     import importlib.metadata
 
