@@ -449,6 +449,9 @@ def _rows_to(times: np.ndarray, t: float, path: Path) -> int:
 def _diag_rows_to(path: Path, t: float) -> tuple[int, int]:
     """Rows of the diagnostics file up to the interval ending at ``t``, and their length in bytes: they must be the
     intervals 1, 2, ... in order, the last one ending at ``t``."""
+    if not path.exists():  # (it read "not the diagnostics of a cosim run": a red team)
+        raise OutputError(f"{path}, the diagnostics beside the results, is missing (removed since the run stopped): "
+                          "run it again from the start with --overwrite")
     if not _has_header(path, "interval"):
         raise OutputError(f"{path}: not the diagnostics of a cosim run to resume")
     raw = path.read_bytes()

@@ -144,23 +144,29 @@ def test_a_last_interval_cut_to_end_at_stop_is_no_resume_point(tmp_path: Path) -
     assert part.read_bytes() == whole.read_bytes()
 
 
-@pytest.mark.parametrize("damage", ["diag cut", "diag edited", "resume point cut", "results edited"])
+@pytest.mark.parametrize("damage", ["diag cut", "diag edited", "resume point cut", "results edited", "diag removed"])
 def test_damaged_files_are_refused_in_one_line_and_left_as_they_are(tmp_path: Path, damage: str) -> None:
     sc = every(OSCILLATOR, 10)
     out = tmp_path / "x.csv"
     with pytest.raises(Stop):
         run_scenario(sc, stop=3.0, output=out, inprocess=True, progress=False, on_interval=stop_after(47))
     target = {"diag cut": Path(f"{out}.diag.csv"), "diag edited": Path(f"{out}.diag.csv"),
-              "resume point cut": resume_path(out), "results edited": out}[damage]
+              "resume point cut": resume_path(out), "results edited": out,
+              "diag removed": Path(f"{out}.diag.csv")}[damage]
     raw = target.read_bytes()
     lines = raw.splitlines(keepends=True)
     damaged = {"diag cut": b"".join(lines[:20]), "diag edited": b"".join(lines[:10] + [b"abc\n"] + lines[11:]),
-               "resume point cut": raw[:1200], "results edited": b"".join(lines[:50] + [b"a,b,c\n"] + lines[51:])}
-    target.write_bytes(damaged[damage])
+               "resume point cut": raw[:1200], "results edited": b"".join(lines[:50] + [b"a,b,c\n"] + lines[51:]),
+               "diag removed": b""}
+    if damage == "diag removed":  # (it read "not the diagnostics of a cosim run to resume": a red team)
+        target.unlink()
+    else:
+        target.write_bytes(damaged[damage])
     before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
     with pytest.raises(OutputError) as err:
         run_scenario(sc, stop=3.0, output=out, inprocess=True, progress=False, resume=True)
     assert "\n" not in str(err.value) and ("run it again" in str(err.value) or "cannot resume" in str(err.value))
+    assert damage != "diag removed" or "is missing (removed since the run stopped)" in str(err.value), err.value
     assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
 
 
