@@ -121,9 +121,7 @@ class ResultWriter:
                 self._data = AppendFile(self._stage(stream_path(self.path)), "the NPZ's streamed samples")
                 self._data.append(stream_header(self.columns, self.units))
             else:
-                meta = {"format": "cosim results", "columns": self.columns, "units": self.units}
-                atomic_write(self._stage(meta_path(self.path)),
-                             lambda f: f.write(json.dumps(meta, indent=1).encode() + b"\n"))
+                self._write_units(self._stage(meta_path(self.path)))
                 self._data = AppendFile(self._stage(self.path), "results")
                 self._data.append(_csv_header(self.columns).encode())
             self._diag = AppendFile(self._stage(diag_path(self.path)), "diagnostics")
@@ -180,6 +178,11 @@ class ResultWriter:
                 return marks
         return None
 
+    def _write_units(self, path: Path) -> None:
+        """A CSV's ``.meta.json``: its columns and their units."""
+        meta = {"format": "cosim results", "columns": self.columns, "units": self.units}
+        atomic_write(path, lambda f: f.write(json.dumps(meta, indent=1).encode() + b"\n"))
+
     def _resume(self, t: float, written: Mapping[str, Any] | None = None) -> None:
         data = stream_path(self.path) if self._npz else self.path
         rebuilt = False
@@ -217,6 +220,8 @@ class ResultWriter:
                                     digest=digests["results"])
             self._diag = AppendFile(diag_path(self.path), "diagnostics", keep=diag_rows[1],
                                     digest=digests["diagnostics"])
+            if not self._npz:  # (removed or edited since the stop, it stayed so: a red team)
+                self._write_units(meta_path(self.path))
         except BaseException as exc:
             self._close_files()
             if rebuilt and self._data is None:  # refused: the NPZ stays as it was, alone
