@@ -22,7 +22,7 @@ from cosim.contract import MalformedReply, SubsimError
 from cosim.coupler.couplings import CouplingError, SignalRef
 from cosim.coupler.plan import Plan
 from cosim.coupler.relaxation import Interval, RunSummary, Settings
-from cosim.driver import Abandoned, Coordinator, Deadline, Recovery, plan_for
+from cosim.driver import Abandoned, Coordinator, Deadline, Recovery, Restart, plan_for
 from cosim.handles import Description, InProcessHandle, SubsimHandle
 from cosim.importing import differing_code
 from cosim.launch import NOT_UP, PRIVATE, UNSPECIFIED_HOSTS, Bus, Elsewhere, SubsimProcess, endpoint_for
@@ -86,6 +86,7 @@ class Session:
     log: Log = say
     listen: str | None = None  # the router endpoint asked for (--listen): what external subsims are told
     restarts_left: int = 0  # the run's restarts not used by subsims lost while they started
+    started_again: list[Restart] = field(default_factory=list)  # those, for the run's summary
 
     def revive(self, name: str, why: str = "") -> SubsimHandle:
         """A new process for a subsim that died or hung (``why``: how), configured as at the run's start: a launched
@@ -279,6 +280,7 @@ def _may_start_again(session: Session, exc: SubsimError, name: str) -> bool:
             or session.scenario.subsims[name].launcher):  # (over ssh a kill reads as an exit code)
         return False
     session.restarts_left -= 1
+    session.started_again.append(Restart(name, session.scenario.start, f"was lost while starting ({exc.message})", 0))
     more = f"{session.restarts_left} more restart{'s' if session.restarts_left != 1 else ''} in this run at most"
     session.log(f"cosim: {name} was lost while starting ({exc.message}); starting it again ({more})")
     return True
@@ -692,12 +694,13 @@ def run_scenario(
         interrupt.finished()  # a stop asked for now would only cut the cleanup of a finished run short
         writer.close()
         bar.done()
+        restarted = {"restarts": [*session.started_again, *coordinator.restarts]}
         if lock is None:
             return RunReport(method, summary, None, None, coordinator.order, [str(c) for c in coordinator.feedback],
-                             {"restarts": coordinator.restarts})
+                             restarted)
         resume_path(output).unlink(missing_ok=True)  # finished: nothing to resume
         return RunReport(method, summary, output, diag_path(output), coordinator.order,
-                         [str(c) for c in coordinator.feedback], {"restarts": coordinator.restarts})
+                         [str(c) for c in coordinator.feedback], restarted)
     finally:
         with interrupt.deferred():  # a signal arriving now must not cut the subsims' stop short
             session.close()
