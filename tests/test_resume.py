@@ -298,6 +298,18 @@ def test_a_resume_point_without_the_files_hashes_says_that_edits_are_not_found(t
                     f"{part} and its diagnostics: edits to them since are not found"]
 
 
+def stopped_and_resumed_once(sc, part: Path) -> list[str]:
+    """Run ``sc`` to its 47th interval (a resume point every 10), resume it and stop it 5 intervals on: what that
+    resume said."""
+    with pytest.raises(Stop):
+        run_scenario(sc, stop=3.0, output=part, inprocess=True, progress=False, on_interval=stop_after(47))
+    said: list[str] = []
+    with pytest.raises(Stop):
+        run_scenario(sc, stop=3.0, output=part, inprocess=True, progress=False, resume=True, log=said.append,
+                     on_interval=stop_after(5))
+    return said
+
+
 def test_a_resume_with_another_file_a_parameter_names_goes_on_and_says_so(tmp_path: Path, monkeypatch) -> None:
     """An FMU rebuilt between the stop and the resume: the run went on with the other model and said nothing (FMI
     probe). Going on is right (fixing a model is a reason to resume), unnoticed is not."""
@@ -311,12 +323,7 @@ def test_a_resume_with_another_file_a_parameter_names_goes_on_and_says_so(tmp_pa
     monkeypatch.setattr(cosim.runner, "model_files", lambda params: model_files({"a": {"fmu": str(fmu)}}))
     sc = every(OSCILLATOR, 10)
     part = tmp_path / "part.csv"
-    with pytest.raises(Stop):
-        run_scenario(sc, stop=3.0, output=part, inprocess=True, progress=False, on_interval=stop_after(47))
-    said: list[str] = []
-    with pytest.raises(Stop):
-        run_scenario(sc, stop=3.0, output=part, inprocess=True, progress=False, resume=True, log=said.append,
-                     on_interval=stop_after(5))
+    said = stopped_and_resumed_once(sc, part)
     assert said == []  # the same file
     fmu.write_bytes(b"another build")
     run_scenario(sc, stop=3.0, output=part, inprocess=True, progress=False, resume=True, log=said.append)
@@ -336,12 +343,7 @@ def test_a_resume_with_other_model_code_goes_on_and_says_which_module_changed(tm
     (tmp_path / "s.toml").write_text(text)
     sc = every(tmp_path / "s.toml", 10)
     part = tmp_path / "part.csv"
-    with pytest.raises(Stop):
-        run_scenario(sc, stop=3.0, output=part, inprocess=True, progress=False, on_interval=stop_after(47))
-    said: list[str] = []
-    with pytest.raises(Stop):
-        run_scenario(sc, stop=3.0, output=part, inprocess=True, progress=False, resume=True, log=said.append,
-                     on_interval=stop_after(5))
+    said = stopped_and_resumed_once(sc, part)
     assert said == []  # the same code
     (tmp_path / "resumehelper.py").write_text("SCALE = 2.0\n")
     run_scenario(sc, stop=3.0, output=part, inprocess=True, progress=False, resume=True, log=said.append)
