@@ -526,6 +526,15 @@ class Instance:
         get(dx.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), n)
         return dx
 
+    def set_in_event_mode(self, ports: RealPorts, values: np.ndarray) -> float | None:
+        """Set discrete inputs as model exchange allows: in event mode, then the event iteration, then back to
+        continuous-time mode. The time of the next time event the FMU then schedules, if any."""
+        self.call("EnterEventMode", self._fmu.enterEventMode)
+        self.set_reals(ports, values)
+        next_event = self._event_iteration()
+        self.call("EnterContinuousTimeMode", self._fmu.enterContinuousTimeMode)
+        return next_event
+
     def completed_step(self) -> bool:
         """True when the FMU asks for event mode (not supported in model exchange)."""
         enter, terminate = self.call("CompletedIntegratorStep", self._fmu.completedIntegratorStep, False)

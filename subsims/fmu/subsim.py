@@ -199,6 +199,12 @@ class FmuSubsim(Subsim):
         self._set_ports(info)
         self._in_ports = RealPorts.of(info.inputs)
         self._out_ports = RealPorts.of(info.outputs)
+        # model exchange sets a discrete input only in event mode: once an interval, at its start (FMI: a discrete
+        # input changes at events only); the continuous ones wherever the solver evaluates the FMU
+        self._discrete_at = [i for i, v in enumerate(info.inputs) if v.variability == "discrete"]
+        self._continuous_at = [i for i, v in enumerate(info.inputs) if v.variability != "discrete"]
+        self._in_discrete = RealPorts.of(tuple(info.inputs[i] for i in self._discrete_at))
+        self._in_continuous = RealPorts.of(tuple(info.inputs[i] for i in self._continuous_at))
         _free(self._holder)
         try:
             inst = Instance(info, kind, self.name)
@@ -334,11 +340,19 @@ class FmuSubsim(Subsim):
 
     def _advance_me(self, inst: Instance, times: np.ndarray, u: InputFunction) -> np.ndarray:
         n = self.info.n_states
-        t1 = float(times[-1])
+        t0, t1 = float(times[0]), float(times[-1])
+        continuous = self._continuous_at
+        if self._discrete_at:  # (fmi2SetReal refused them in continuous-time mode: an FMI probe, Feedthrough)
+            held = self._input_matrix(u, np.array([t0]))[0][self._discrete_at]
+            inst.set_time(t0)
+            next_event = inst.set_in_event_mode(self._in_discrete, held)
+            if next_event is not None:
+                raise ModelError(f"the FMU schedules a time event at t={next_event!r} after its discrete inputs were "
+                                 "set; model exchange events are not supported (use interface = 'cs')")
 
         def at(t: float, x: np.ndarray) -> None:  # the FMU at time t, in state x, with the inputs there
             inst.set_time(t)
-            inst.set_reals(self._in_ports, self._input_matrix(u, np.array([t]))[0])
+            inst.set_reals(self._in_continuous, self._input_matrix(u, np.array([t]))[0][continuous])
             inst.set_states(x)
 
         def rhs(t: float, x: np.ndarray) -> np.ndarray:
@@ -358,7 +372,7 @@ class FmuSubsim(Subsim):
         out = np.empty((times.size, len(self._out_ports.vrs)))
         for i, t in enumerate(times):
             inst.set_time(float(t))
-            inst.set_reals(self._in_ports, inputs[i])
+            inst.set_reals(self._in_continuous, inputs[i][continuous])
             if n:
                 inst.set_states(states[:, i])
             out[i] = inst.get_reals(self._out_ports)

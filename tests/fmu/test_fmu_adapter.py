@@ -144,6 +144,52 @@ def test_model_exchange_reads_inputs_between_samples(fmus: dict[str, Path], vers
     np.testing.assert_allclose(u, forced(t, 0.5, 0.0, a, b), rtol=0, atol=1e-8)
 
 
+def test_model_exchange_sets_a_discrete_input_in_event_mode_once_an_interval(
+        fmus: dict[str, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """FMI lets model exchange set a discrete input only at instantiation, in initialization or event mode: every
+    right-hand side set it, and the Reference FMUs' Feedthrough refused ('can only be set ... in event mode'), so no
+    ME FMU with a discrete input could run (an FMI probe). Here the mass's F is declared discrete and the rule is
+    enforced on the FMU's calls: F is set once, in event mode, at the interval's start, and held (a ramp of force
+    acts as its first sample)."""
+    import zipfile
+
+    from subsims.fmu.fmu import FmiCallError, Instance
+
+    with zipfile.ZipFile(fmus["mass2"]) as zf:
+        members = {n: zf.read(n) for n in zf.namelist()}
+    xml = members["modelDescription.xml"].decode()
+    head = xml.index('<ScalarVariable name="F"')
+    tag = xml[head:xml.index(">", head) + 1]
+    assert 'variability="continuous"' in tag
+    members["modelDescription.xml"] = xml.replace(tag, tag.replace('variability="continuous"',
+                                                                   'variability="discrete"')).encode()
+    discrete = tmp_path / "discrete.fmu"
+    with zipfile.ZipFile(discrete, "w") as zf:
+        for name, data in members.items():
+            zf.writestr(name, data)
+    f_vr = next(v.vr for v in read_fmu(discrete).inputs if v.name == "F")
+    in_event_mode, set_reals, set_in_event_mode = [False], Instance.set_reals, Instance.set_in_event_mode
+
+    def guarded_set(self, ports, values):
+        if f_vr in ports.vrs and not in_event_mode[0]:
+            raise FmiCallError("fmi2SetReal: F can only be set in initialization or event mode")
+        set_reals(self, ports, values)
+
+    def event_mode(self, ports, values):
+        in_event_mode[0] = True
+        try:
+            return set_in_event_mode(self, ports, values)
+        finally:
+            in_event_mode[0] = False
+
+    monkeypatch.setattr(Instance, "set_reals", guarded_set)
+    monkeypatch.setattr(Instance, "set_in_event_mode", event_mode)
+    rt = configured(discrete, interface="me", u0=0.5)
+    t = np.linspace(0.0, 0.5, 11)
+    u = run(rt, t, 1.0 + 40.0 * t)["outputs"]["u"][:, 0]
+    np.testing.assert_allclose(u, forced(t, 0.5, 0.0, 1.0, 0.0), rtol=0, atol=1e-8)  # F held at its t = 0 value
+
+
 def test_model_exchange_asks_after_every_integrator_step_whether_the_fmu_wants_an_event(fmus: dict[str, Path]) -> None:
     """fmi2CompletedIntegratorStep after each accepted step (FMI 2.0, 3.2.2): an FMU asking for event mode from
     t = 0.25 on is refused at the step that got there, not at the interval's end (t = 0.4, as before)."""
