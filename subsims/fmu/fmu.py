@@ -166,14 +166,21 @@ def _settable(v: Any, major: int) -> bool:
     return v.start is not None and v.initial in {"exact", "approx"} and v.causality in {"local", "output"}
 
 
+def _a(word: str) -> str:
+    """``word`` with its indefinite article: 'an Integer', 'a Float64'."""
+    return f"{'an' if word[:1].lower() in 'aeiou' else 'a'} {word}"
+
+
 def _unused(v: Any) -> str | None:
     """Why cosim can neither couple nor set ``v``, or None (a port, a settable variable, or nothing to use)."""
+    if v.causality == "structuralParameter":  # (FMI 3: it sizes arrays; configuration mode is not run)
+        return f"a structural parameter ({v.type}): structural parameters are not supported"
     if v.dimensions:
         return f"an array ({v.type} with dimensions): arrays are not supported"
     if v.causality == "output" and v.type not in REAL_TYPES:
-        return f"a {v.type} output: only real outputs are ports"
+        return f"{_a(v.type)} output: only real outputs are ports"
     if v.causality in {"input", "parameter"} and v.type in {"Binary", "Clock"}:
-        return f"a {v.type} {v.causality}: {v.type} variables are not supported"
+        return f"{_a(v.type)} {v.causality}: {v.type} variables are not supported"
     return None
 
 
@@ -206,7 +213,9 @@ def read_fmu(path: str | os.PathLike) -> FmuInfo:
         if interface is not None:
             offered[key] = interface.modelIdentifier
     if not offered:
-        raise FmuError(f"{path}: offers neither co-simulation nor model exchange")
+        only = " (it offers scheduled execution only, which cosim does not run)" if getattr(
+            md, "scheduledExecution", None) is not None else ""
+        raise FmuError(f"{path}: offers neither co-simulation nor model exchange{only}")
     ext = fmpy.sharedLibraryExtension
     identifiers = {k: i for k, i in offered.items() if f"binaries/{platform}/{i}{ext}" in names}
     if not identifiers:

@@ -42,6 +42,7 @@ from subsims.fmu.fmu import FmiCallError, FmuError, FmuInfo, Instance, RealPorts
 
 SETTINGS = {"fmu", "interface", "substeps", "solver", "rtol", "atol", "max_step", "tolerance", "state_capacity",
             "start_time", "values"}
+F32_MAX = float(np.finfo(np.float32).max)
 FLOAT32_RTOL = 1e-6  # the tightest rtol a Float32 state can meet (its resolution: 1.2e-7)
 CS_ONLY = ("substeps",)  # settings of one interface only
 ME_ONLY = ("solver", "rtol", "atol", "max_step")
@@ -314,11 +315,23 @@ class FmuSubsim(Subsim):
             values = u(points)
             cols = [np.asarray(values[n], dtype=np.float64) for n in names]
             if all(c.shape == (points.size, 1) for c in cols):
-                return np.hstack(cols)
+                return self._in_float32_range(np.hstack(cols), points)
         except (TypeError, ValueError, IndexError):
             pass
         rows = [u(float(t)) for t in points]
-        return np.array([[float(np.asarray(r[n]).reshape(-1)[0]) for n in names] for r in rows])
+        return self._in_float32_range(np.array([[float(np.asarray(r[n]).reshape(-1)[0]) for n in names]
+                                                for r in rows]), points)
+
+    def _in_float32_range(self, inputs: np.ndarray, points: np.ndarray) -> np.ndarray:
+        """``inputs``, unless one for a Float32 input is beyond Float32's range: that FMU input would be inf (and
+        its outputs blamed for it: an FMI probe)."""
+        at = list(self._in_ports.f32_at)
+        if at and not (np.abs(inputs[:, at]) <= F32_MAX).all():
+            row, col = np.argwhere(~(np.abs(inputs[:, at]) <= F32_MAX))[0]
+            raise ModelError(f"input {self.info.inputs[at[col]].name} = {float(inputs[row, at[col]])!r} at t = "
+                             f"{float(points[row])!r} is beyond the largest Float32 ({F32_MAX:.4g}), the type of that "
+                             "FMU input")
+        return inputs
 
     def _advance_cs(self, inst: Instance, times: np.ndarray, u: InputFunction) -> np.ndarray:
         m = self.substeps

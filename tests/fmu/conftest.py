@@ -58,6 +58,8 @@ def fmus(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
               '<Dimension start="2"/></Float64>'
               '<Int32 name="count" valueReference="22" causality="output" variability="discrete"/>'
               '<Int32 name="mode" valueReference="23" causality="parameter" variability="fixed" start="0"/>'
+              '<UInt64 name="rows" valueReference="26" causality="structuralParameter" variability="fixed" '
+              'start="2"/>'
               '<UInt8 name="level" valueReference="24" causality="parameter" variability="fixed" start="0"/>'
               '<Float32 name="gain32" valueReference="25" causality="parameter" variability="fixed" start="1"/>')
     xml3 = build_mass.model_description(3).replace("</ModelVariables>", extras + "</ModelVariables>")

@@ -130,6 +130,14 @@ def test_float32_ports_are_read_and_written_as_float32(fmus: dict[str, Path], ki
     v = -(0.3 - 7.0 / KS) * W * np.sin(W * t) - 1.0 * np.cos(W * t)  # d/dt of forced()
     np.testing.assert_allclose(out["v"][:, 0], v, rtol=0, atol=1e-5)
     assert np.all(out["v"][:, 0] == out["v"][:, 0].astype(np.float32))  # it came through a float32
+    # a force beyond float32's range: the FMU's F would be inf, and its outputs were blamed (an FMI probe)
+    with pytest.raises(CosimError) as err:
+        run(configured(fmus["mass3_f32"], interface=kind, **({"rtol": 1e-6} if kind == "me" else {})), t,
+            np.array([7.0, 7.0, 1e39, 7.0, 7.0]))
+    said = err.value.message  # (model exchange meets it between the samples, on the interpolated force)
+    assert err.value.code == "model_error" and said.startswith("at t in [0.0, 0.4]: input F = ") and said.endswith(
+        "is beyond the largest Float32 (3.403e+38), the type of that FMU input"), said
+    assert kind == "me" or "input F = 1e+39 at t = 0.2 " in said, said
 
 
 @pytest.mark.parametrize("version", [2, 3])

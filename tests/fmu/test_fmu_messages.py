@@ -108,13 +108,18 @@ def test_variables_cosim_does_not_use_are_listed_and_named_when_given(fmus: dict
     assert info.summary()["not_used"] == {
         "gains": "an array (Float64 with dimensions): arrays are not supported",
         "bias": "an array (Float64 with dimensions): arrays are not supported",
-        "count": "a Int32 output: only real outputs are ports",
+        "count": "an Int32 output: only real outputs are ports",
+        # (a structural parameter was in neither list, and given it was 'unknown FMU variable': an FMI probe)
+        "rows": "a structural parameter (UInt64): structural parameters are not supported",
     }
     assert [v.name for v in info.inputs] == ["F"] and [v.name for v in info.outputs] == ["u", "v"]
     with pytest.raises(CosimError) as err:
         Runtime(FmuSubsim).configure({"fmu": str(fmus["mass3_extras"]), "gains": [2.0, 0.0]})
     assert err.value.message == ("configure: bad parameter: gains in mass3_extras.fmu is an array (Float64 with "
                                  "dimensions): arrays are not supported")
+    with pytest.raises(CosimError) as err:
+        Runtime(FmuSubsim).configure({"fmu": str(fmus["mass3_extras"]), "rows": 3})
+    assert "rows in mass3_extras.fmu is a structural parameter (UInt64)" in err.value.message, err.value.message
 
 
 def test_an_alias_and_its_variable_given_together_are_refused(fmus: dict[str, Path]) -> None:
