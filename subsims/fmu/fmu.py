@@ -79,6 +79,18 @@ class Variable:
     start: str | None
     unit: str
     description: str
+    low: float | None = None  # its declared min and max (the model description's, or its declared type's)
+    high: float | None = None
+
+
+def _bound(v: Any, which: str) -> float | None:
+    raw = getattr(v, which, None)
+    if raw is None and getattr(v, "declaredType", None) is not None:
+        raw = getattr(v.declaredType, which, None)
+    try:
+        return None if raw is None or isinstance(raw, bool) else float(raw)
+    except (TypeError, ValueError):
+        return None
 
 
 @dataclass(frozen=True)
@@ -239,7 +251,7 @@ def read_fmu(path: str | os.PathLike) -> FmuInfo:
     )
     settable = {
         v.name: Variable(v.name, v.valueReference, v.type, v.causality, v.variability, v.initial, v.start,
-                         v.unit or "", v.description or "")
+                         v.unit or "", v.description or "", _bound(v, "min"), _bound(v, "max"))
         for v in md.modelVariables if _settable(v, major)
     }
     return FmuInfo(
@@ -296,8 +308,19 @@ def check_binaries(info: FmuInfo) -> None:
 # --- values -------------------------------------------------------------------------------------------
 
 def coerce(var: Variable, value: Any, major: int) -> Any:
-    """``value`` as the Python type the FMU variable takes, within its type's range (FMI ``major`` version);
-    FmuError naming the variable otherwise (a value the FMU's type would wrap or overflow, too)."""
+    """``value`` as the Python type the FMU variable takes, within its type's range (FMI ``major`` version) and its
+    declared min and max; FmuError naming the variable otherwise (a value the FMU's type would wrap or overflow,
+    too)."""
+    value = _typed(var, value, major)
+    if (var.low is not None and value < var.low) or (var.high is not None and value > var.high):
+        low = "" if var.low is None else f"{var.low:g}"
+        high = "" if var.high is None else f"{var.high:g}"
+        raise FmuError(f"{var.name}: {value!r} is outside its declared range [{low}, {high}] (min and max in the "
+                       "FMU's model description)")
+    return value
+
+
+def _typed(var: Variable, value: Any, major: int) -> Any:
     if var.type in REAL_TYPES:
         ok = isinstance(value, (int, float)) and not isinstance(value, bool) and np.isfinite(value)
         if ok and var.type == "Float32" and abs(value) > FLOAT32_MAX:

@@ -103,6 +103,33 @@ def test_out_of_range_values_are_refused_at_configure_naming_the_variable(fmus: 
         assert rt.state is None
 
 
+@pytest.mark.parametrize("version", [2, 3])
+def test_a_value_outside_the_declared_min_and_max_is_refused(fmus: dict[str, Path], tmp_path: Path,
+                                                             version: int) -> None:
+    """The Reference FMUs' BouncingBall ran with e = 1.5 though it declares max 1 (an FMI probe): FMI calls a value
+    outside min and max an error the FMU may not check. Refused naming the variable and its range."""
+    import zipfile
+
+    with zipfile.ZipFile(fmus[f"mass{version}"]) as zf:
+        members = {n: zf.read(n) for n in zf.namelist()}
+    xml = members["modelDescription.xml"].decode()
+    at = xml.index('<ScalarVariable name="m"' if version == 2 else '<Float64 name="m"')
+    end = xml.index("/>", xml.index("<Real ", at) if version == 2 else at)
+    members["modelDescription.xml"] = (xml[:end] + ' min="0.5" max="10"' + xml[end:]).encode()
+    bounded = tmp_path / "bounded.fmu"
+    with zipfile.ZipFile(bounded, "w") as zf:
+        for name, data in members.items():
+            zf.writestr(name, data)
+    for m in (0.1, 12.0):
+        with pytest.raises(CosimError) as err:
+            Runtime(FmuSubsim).configure({"fmu": str(bounded), "m": m})
+        assert err.value.code == "bad_value" and err.value.message.endswith(
+            f"m: {m!r} is outside its declared range [0.5, 10] (min and max in the FMU's model description)"), \
+            err.value.message
+    for m in (0.5, 10, 2.0):  # (the ends are in the range)
+        Runtime(FmuSubsim).configure({"fmu": str(bounded), "m": m})
+
+
 def test_variables_cosim_does_not_use_are_listed_and_named_when_given(fmus: dict[str, Path]) -> None:
     info = read_fmu(fmus["mass3_extras"])
     assert info.summary()["not_used"] == {
