@@ -349,7 +349,7 @@ def test_a_run_whose_stderr_reader_went_away_still_runs_to_the_end(tmp_path: Pat
 
 @pytest.mark.parametrize(("interval", "words"), [
     ("5", "transform 'gain' produced NaN or inf (as a coupling iteration that diverges makes them: a shorter "
-          "[coupling] interval then)"),
+          "[coupling] interval then; its sources reached "),
     ("20", "on inputs the coupling iteration made: if that iteration diverged (values growing stage by stage), a "
            "shorter [coupling] interval is the cure"),
 ])
