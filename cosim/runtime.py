@@ -400,8 +400,8 @@ class Runtime:
             raise CosimError("model_error", f"advance() must return (outputs, end_state), got {got}")
         outputs, end_state = result
         checked = self._check_outputs(outputs, times)
-        end_state = self._check_state(end_state, state.size, f"the end state advance() returned over t in "
-                                      f"[{times[0]:g}, {times[-1]:g}]", from_model=True)
+        end_state = self._check_state(end_state, state.size, "the end state advance() returned", from_model=True,
+                                      over=times)
         if trial is not None:
             self._commit(trial)
         end = float(times[-1])
@@ -498,23 +498,29 @@ class Runtime:
         return f
 
     @staticmethod
-    def _check_state(state: Any, size: int | None, what: str, from_model: bool = False) -> np.ndarray:
+    def _check_state(state: Any, size: int | None, what: str, from_model: bool = False,
+                     over: np.ndarray | None = None) -> np.ndarray:
         """``from_model``: a state ``advance()`` returned. Its faults are not the caller's but the model's:
-        ``model_error``."""
-        bad = "model_error" if from_model else "bad_value"
+        ``model_error``. ``over``: the interval's times, named in an error (formatted only then: every request
+        passes here)."""
+
+        def refused(why: str) -> CosimError:
+            where = "" if over is None else f" over t in [{over[0]:g}, {over[-1]:g}]"
+            return CosimError("model_error" if from_model else "bad_value", f"{what}{where} {why}")
+
         if state is None:  # (it read "must have shape 1-D, got ()", blaming the parameters: a newcomer probe)
-            raise CosimError(bad, f"{what} is None: a state is a 1-D array of floats (return it)")
+            raise refused("is None: a state is a 1-D array of floats (return it)")
         if getattr(getattr(state, "dtype", None), "kind", None) == "c":  # (a cast would drop the imaginary part)
-            raise CosimError(bad, f"{what} is complex ({state.dtype}): a state is real numbers")
+            raise refused(f"is complex ({state.dtype}): a state is real numbers")
         try:
             s = np.asarray(state, dtype=np.float64)
         except (TypeError, ValueError):
-            raise CosimError(bad, f"{what} is not a float vector") from None
+            raise refused("is not a float vector") from None
         if s.ndim != 1 or (size is not None and s.size != size):
             want = f"({size},)" if size is not None else "1-D"
-            raise CosimError(bad, f"{what} must have shape {want}, got {s.shape}")
+            raise refused(f"must have shape {want}, got {s.shape}")
         if not np.isfinite(s).all():
-            raise CosimError(bad, f"{what} contains NaN or inf")
+            raise refused("contains NaN or inf")
         return _readonly(s)
 
     def _input_function(
