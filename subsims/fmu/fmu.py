@@ -442,7 +442,7 @@ class Instance:
         if self.kind == "me":
             next_event = self._event_iteration()
             if next_event is not None:
-                raise FmuError(f"{self.info.path}: model exchange: the FMU schedules a time event at "
+                raise FmuError(f"{self.info.path.name}: model exchange: the FMU schedules a time event at "
                                f"t={next_event!r}; events are not handled in model exchange (use its co-simulation "
                                "interface)")
             self.call("EnterContinuousTimeMode", fmu.enterContinuousTimeMode)
