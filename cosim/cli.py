@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import errno
+import math
 import os
 import shlex
 import signal
@@ -50,7 +51,10 @@ def _run(args: argparse.Namespace) -> int:
             if kept is not None and stop is not None and state["t"] >= stop - 1e-9 * max(1.0, abs(stop)):
                 # every interval is in: only the results' last step failed (an NPZ built from its stream); a resume
                 # point would be refused, "nothing to resume" (a red team)
-                resume_path(Path(state["output"])).unlink(missing_ok=True)
+                try:
+                    resume_path(Path(state["output"])).unlink(missing_ok=True)
+                except OSError:  # (a read-only directory: the note below is what matters)
+                    pass
                 exc.add_note(f"every interval to t = {state['t']:.6g} s, the run's stop, is in {kept}: nothing is "
                              "left to run")
             elif point is not None and kept is not None:  # (a results file removed meanwhile is not there to go on)
@@ -178,8 +182,9 @@ def _run_until_done(args: argparse.Namespace, state: dict) -> int:
         lines.append(f"over interval_tol: {s.over_tol} intervals, accepted at interval_min (their error column in "
                      "the diagnostics says by how much)")
     for r in report.extra.get("restarts", []):
-        lines.append(f"restart: {r.subsim} {r.reason}; " + (f"restored to t = {r.at:g}" if r.restored else
-                                                            "the replacement failed while being restored"))
+        done = ("started again" if math.isnan(r.at) else f"restored to t = {r.at:g}") if r.restored else \
+            "the replacement failed while being restored"
+        lines.append(f"restart: {r.subsim} {r.reason}; {done}")
     if report.method == "distributed":
         lines.append(f"order: {' -> '.join(report.order)}; feedback: {'; '.join(report.feedback) or 'none'}")
     lines.append(f"results: {report.output}\ndiagnostics: {report.diagnostics}")

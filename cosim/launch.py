@@ -192,7 +192,7 @@ def _stopped(pid: int) -> bool:
     """Whether process ``pid`` is stopped by a signal (its state in Linux's /proc is T); False where not known."""
     try:
         with open(f"/proc/{pid}/stat", "rb") as f:
-            return f.read().rpartition(b")")[2].split()[0] in (b"T", b"t")  # (the name in parentheses may hold spaces)
+            return f.read().rpartition(b")")[2].split()[0] == b"T"  # (the name may hold spaces; t, a debugger's: not)
     except (OSError, IndexError):
         return False
 
@@ -479,7 +479,8 @@ class Bus:
         self.close()
 
 
-NOT_UP = "did not come up within"  # (a started process that never answered: cosim.runner starts it again)
+NOT_UP = "did not come up within"  # a started process that never answered: cosim.runner starts it again when it
+STOPPED = "its process is stopped"  # was found stopped (a slow start or a hang in its model would come again)
 
 
 def _wait_ready_or_exit(handle: RemoteHandle, popen: subprocess.Popen, wait: float,
@@ -494,4 +495,6 @@ def _wait_ready_or_exit(handle: RemoteHandle, popen: subprocess.Popen, wait: flo
             return
     how = "" if elsewhere is None else (f" (its launcher {elsewhere.shown!r} still runs: does it "
                                         "wait for a password or a host key?)")
+    if elsewhere is None and _stopped(popen.pid):  # (a slow start would be as slow again: only this is retried)
+        how = f" ({STOPPED})"
     raise SubsimError("no_responder", f"{NOT_UP} {wait:g} s{how}", handle.name, "spawn")

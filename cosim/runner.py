@@ -25,7 +25,7 @@ from cosim.coupler.relaxation import Interval, RunSummary, Settings
 from cosim.driver import Abandoned, Coordinator, Deadline, Recovery, Restart, plan_for
 from cosim.handles import Description, InProcessHandle, SubsimHandle
 from cosim.importing import differing_code
-from cosim.launch import NOT_UP, PRIVATE, UNSPECIFIED_HOSTS, Bus, Elsewhere, SubsimProcess, endpoint_for
+from cosim.launch import NOT_UP, PRIVATE, STOPPED, UNSPECIFIED_HOSTS, Bus, Elsewhere, SubsimProcess, endpoint_for
 from cosim.outputs import OutputError, OutputWriteError, reserve_output, resume_path
 from cosim.progress import Progress
 from cosim.protocol.security import Security
@@ -275,12 +275,12 @@ def _may_start_again(session: Session, exc: SubsimError, name: str) -> bool:
     crash, the OOM killer; not an exit of its own, which would come again) or did not come up while it ran (stopped,
     or hung as it started: a red team's SIGSTOP stopped the run with restarts left), is to be started again: it
     counts as one of the run's restarts (``session.restarts_left``)."""
-    lost = "killed by SIG" in exc.message or exc.message.startswith(NOT_UP)
+    lost = "killed by SIG" in exc.message or (exc.message.startswith(NOT_UP) and STOPPED in exc.message)
     if (exc.code != "no_responder" or not lost or session.restarts_left <= 0
             or session.scenario.subsims[name].launcher):  # (over ssh a kill reads as an exit code)
         return False
     session.restarts_left -= 1
-    session.started_again.append(Restart(name, session.scenario.start, f"was lost while starting ({exc.message})", 0))
+    session.started_again.append(Restart(name, math.nan, f"was lost while starting ({exc.message})", 0))
     more = f"{session.restarts_left} more restart{'s' if session.restarts_left != 1 else ''} in this run at most"
     session.log(f"cosim: {name} was lost while starting ({exc.message}); starting it again ({more})")
     return True
@@ -698,7 +698,10 @@ def run_scenario(
         if lock is None:
             return RunReport(method, summary, None, None, coordinator.order, [str(c) for c in coordinator.feedback],
                              restarted)
-        resume_path(output).unlink(missing_ok=True)  # finished: nothing to resume
+        try:
+            resume_path(output).unlink(missing_ok=True)  # finished: nothing to resume
+        except OSError as exc:  # (a directory made read-only since its last point: the run's results are whole)
+            log(f"cosim: {resume_path(output)} could not be removed ({exc.strerror}): the run is finished, delete it")
         return RunReport(method, summary, output, diag_path(output), coordinator.order,
                          [str(c) for c in coordinator.feedback], restarted)
     finally:

@@ -1046,3 +1046,29 @@ def test_a_resume_point_that_cannot_be_saved_does_not_stop_the_run(tmp_path: Pat
         f"{resume_path(tmp_path / 'x.csv')}; choose another place); the run goes on, and an interrupted run goes on "
         "(--resume) from the last point saved, if any"]
     assert (tmp_path / "x.csv").read_bytes() == (tmp_path / "calm.csv").read_bytes()
+
+
+def test_a_resume_point_that_cannot_be_removed_at_the_end_does_not_fail_a_finished_run(tmp_path: Path,
+                                                                                       monkeypatch) -> None:
+    """The output directory made immutable after a resume point was saved: the finished run raised PermissionError
+    removing it, a traceback and exit 1 for a run whose results were whole (a review)."""
+    from cosim.outputs import resume_path
+    from cosim.runner import run_scenario
+    from cosim.scenario import load, parse
+
+    base = load(OSCILLATOR)
+    sc = parse({**base.raw, "run": {"checkpoint_every": 2}}, base.path)
+    import cosim.runner
+
+    out = tmp_path / "x.csv"
+
+    class Kept(type(Path())):  # a resume point in a directory that no longer lets it go
+        def unlink(self, missing_ok: bool = False) -> None:
+            raise PermissionError(1, "Operation not permitted", str(self))
+
+    monkeypatch.setattr(cosim.runner, "resume_path", lambda output: Kept(resume_path(output)))
+    said: list[str] = []
+    report = run_scenario(sc, stop=0.5, output=out, inprocess=True, progress=False, log=said.append)
+    assert report.summary.intervals == 10 and resume_path(out).exists()
+    assert said == [f"cosim: {resume_path(out)} could not be removed (Operation not permitted): the run is finished, "
+                    "delete it"]

@@ -9,6 +9,7 @@ for bit.
 
 from __future__ import annotations
 
+import math
 import os
 import signal
 import subprocess
@@ -572,7 +573,7 @@ class Fragile(Mass):
 
 
 HANGS_ONCE = """
-import time
+import os, signal, time
 from pathlib import Path
 from subsims.oscillator.subsim import Mass
 
@@ -581,27 +582,36 @@ MARK = Path(__file__).with_name("hung")
 
 class Slow(Mass):
     def __init__(self):
-        if not MARK.exists():  # the first process stands still before it can answer (a SIGSTOP, a stuck licence call)
+        if not MARK.exists():  # the first process stands still before it can answer
             MARK.touch()
-            time.sleep(3600)
+            {how}
         super().__init__()
 """
 
 
-def test_a_subsim_that_does_not_come_up_is_started_again(tmp_path: Path) -> None:
-    """A launched subsim that stood still as it started (a red team's SIGSTOP of over 20 s) stopped the run, "did
-    not come up within 20 s", with restarts left: it is killed and started again, within the run's restarts."""
-    (tmp_path / "slow.py").write_text(HANGS_ONCE)
+def test_a_subsim_stopped_as_it_starts_is_started_again(tmp_path: Path) -> None:
+    """A launched subsim stopped as it started (a red team's SIGSTOP of over 20 s) stopped the run, "did not come
+    up within 20 s", with restarts left: it is killed and started again, within the run's restarts, and the summary
+    says so. One slow or stuck in its own code (not stopped) is not: it would be as slow again (a review)."""
     sc = tmp_path / "s.toml"
     sc.write_text(OSCILLATOR.read_text().replace('model = "subsims.oscillator.subsim:Mass"', 'model = "slow:Slow"', 1))
+    (tmp_path / "slow.py").write_text(HANGS_ONCE.replace("{how}", "time.sleep(3600)"))
+    with pytest.raises(SubsimError, match=r"did not come up within 20 s$"):
+        run_scenario(load(sc), stop=0.2, output=tmp_path / "y.csv", progress=False, log=lambda m: None, restarts=1)
+    (tmp_path / "hung").unlink()
+    (tmp_path / "slow.py").write_text(HANGS_ONCE.replace("{how}", "os.kill(os.getpid(), signal.SIGSTOP)"))
     said: list[str] = []
     run_scenario(load(OSCILLATOR), stop=0.2, output=tmp_path / "calm.csv", progress=False, log=said.append)
-    run_scenario(load(sc), stop=0.2, output=tmp_path / "x.csv", progress=False, log=said.append, restarts=1)
+    report = run_scenario(load(sc), stop=0.2, output=tmp_path / "x.csv", progress=False, log=said.append, restarts=1)
     assert (tmp_path / "hung").exists()
     assert [m for m in said if "lost while starting" in m] == [
-        "cosim: mass1 was lost while starting (did not come up within 20 s); starting it again (0 more restarts in "
-        "this run at most)"]
+        "cosim: mass1 was lost while starting (did not come up within 20 s (its process is stopped)); starting it "
+        "again (0 more restarts in this run at most)"]
     assert (tmp_path / "x.csv").read_bytes() == (tmp_path / "calm.csv").read_bytes()
+    restarts = report.extra["restarts"]  # in the report and the summary too (they were left out: a red team)
+    assert [(r.subsim, r.reason) for r in restarts] == [
+        ("mass1", "was lost while starting (did not come up within 20 s (its process is stopped))")]
+    assert math.isnan(restarts[0].at)  # nothing was restored: the summary says "started again"
 
 
 @pytest.mark.parametrize("where", ["start", "configure"])

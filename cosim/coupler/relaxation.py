@@ -31,7 +31,7 @@ A driver (``cosim.driver``) performs the actions over in-process or remote handl
 from __future__ import annotations
 
 import math
-from collections import Counter
+from collections import Counter, deque
 from collections.abc import Generator, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -184,17 +184,18 @@ class RunSummary:
 
 class NotConverged(RuntimeError):
     def __init__(self, t0: float, t1: float, stages: int, failing: list[str], residuals: dict[str, list[float]],
-                 values: Mapping[str, np.ndarray] | None = None, cycled: bool = False):
+                 values: Mapping[str, np.ndarray] | None = None, cycled: int = 0):
         """``values``: the failing signals' last samples, to tell a residual that is their round-off. ``cycled``:
-        stopped before max_stages, the residuals repeating exactly (:func:`_cycling`)."""
-        why = " (its residuals repeat exactly, stage after stage: more stages would change nothing)" if cycled else ""
+        stopped before max_stages, the signals back to those of that many stages before (:func:`_repeated`)."""
+        why = (f" (its signals came back bit for bit to those of {cycled} stages before: more stages would only go "
+               "round again)") if cycled else ""
         lines = [f"interval [{t0!r}, {t1!r}] did not converge in {stages} stages{why}; failing signals:"]
         for name in failing:
             hist = ", ".join(f"{r:.3e}" for r in residuals[name][-8:])
             lines.append(f"  {name}: residual by stage (last {min(8, len(residuals[name]))}) [{hist}]")
         shorter = "a shorter [coupling] interval (max_halvings > 0 halves it only where needed)"
         trends = {_trend(residuals[n]) for n in failing}
-        roundoff = _roundoff(failing, residuals, values) if trends == {"stalled"} else None
+        roundoff = _roundoff(failing, residuals, values, cycled) if trends == {"stalled"} or cycled else None
         hovering = None if roundoff is not None else _hovering(failing, residuals, values)
         if roundoff is not None:  # a shorter interval would stall at the same level: the tolerances ask too much
             name, level, size = roundoff
@@ -235,20 +236,25 @@ ROUNDOFF = 1e-11  # a flat residual this small against its signal's values is ta
 # ulps: what a gain makes of a settling input's last bits; a real iteration at that level still moves)
 
 
-def _roundoff(failing: Sequence[str], residuals: Mapping[str, list[float]], values: Mapping[str, np.ndarray] | None
-              ) -> tuple[str, float, float] | None:
+def _roundoff(failing: Sequence[str], residuals: Mapping[str, list[float]], values: Mapping[str, np.ndarray] | None,
+              cycled: int = 0) -> tuple[str, float, float] | None:
     """(signal, its residual, the size of its values) with the largest residual, when every failing signal's
     residual has stayed flat over its last 8 stages (each window of 4's largest within 10 % of the one before: no
-    slow contraction or growth) within ``ROUNDOFF`` of its values' size, the smallest channel's (a cycle in the
-    last bits, as a settling signal fed through a gain makes); else None."""
+    slow contraction or growth), or went round a cycle of ``cycled`` stages, within ``ROUNDOFF`` of its values'
+    size, the smallest channel's (a cycle in the last bits, as a settling signal fed through a gain makes); else
+    None."""
     if not values:
         return None
     found = []
     for name in failing:
         r = residuals[name]
-        if len(r) < 8 or not 0.9 <= max(r[-4:]) / max(max(r[-8:-4]), 1e-300) <= 1.1:
+        if cycled:  # the iteration went round: its residuals are those of the cycle, for good
+            level = max(r[-cycled:]) if r else 0.0
+        elif len(r) < 8 or not 0.9 <= max(r[-4:]) / max(max(r[-8:-4]), 1e-300) <= 1.1:
             return None
-        size, level = _size(values[name]), max(r[-4:])
+        else:
+            level = max(r[-4:])
+        size = _size(values[name])
         if not 0.0 < level <= ROUNDOFF * size:
             return None
         found.append((level, name, size))
@@ -256,20 +262,19 @@ def _roundoff(failing: Sequence[str], residuals: Mapping[str, list[float]], valu
     return name, level, size
 
 
-CYCLE_STAGES = 12  # residuals repeating exactly over this many stages, with a period of at most CYCLE_PERIOD: a cycle
-CYCLE_PERIOD = 4
+CYCLE_PERIOD = 4  # stages: an iteration whose checked signals come back bit for bit within this many is a cycle
 
 
-def _cycling(history: Mapping[str, list[float]], failing: Sequence[str]) -> bool:
-    """Whether every failing signal's residuals over its last ``CYCLE_STAGES`` stages repeat exactly with a period of
-    at most ``CYCLE_PERIOD`` stages (a Gauss-Seidel or Jacobi iteration cycling in the last bits of its values, as a
-    gain makes of them): it goes on so to max_stages (a newcomer's run stood at 1.151e-12 for 100 stages)."""
-    for name in failing:
-        r = history.get(name, [])[-CYCLE_STAGES:]
-        if len(r) < CYCLE_STAGES or not any(all(r[i] == r[i - p] for i in range(p, len(r)))
-                                            for p in range(1, CYCLE_PERIOD + 1)):
-            return False
-    return bool(failing)
+def _repeated(values: Mapping[str, np.ndarray], seen: deque[dict[str, bytes]]) -> int:
+    """How many stages back the checked signals ``values`` were already exactly these (0: not within ``seen``, the
+    last stages' values, newest last), recording them in ``seen``. The coupling iteration is a function of them (the
+    next stage runs on them, from the same committed state): values met again mean a cycle that has failed its check
+    at every stage of it, and would go on so to max_stages (a newcomer's heater stood at 1.151e-12 for 100 stages).
+    Equal residuals alone are not that: a signal stepping by the same amount each stage still gets somewhere."""
+    now = {k: v.tobytes() for k, v in values.items()}
+    back = next((len(seen) - i for i, old in enumerate(seen) if old == now), 0)
+    seen.append(now)
+    return back
 
 
 HOVER_STAGES = 32  # stages of a residual going up and down with no trend, a small part of the values: noise
@@ -693,6 +698,7 @@ class Relaxation:
         n, s, plan = times.size, self.settings, self.plan
         inputs = self._guess(times, self._all)
         history: dict[str, list[float]] = {}
+        seen: deque[dict[str, bytes]] = deque(maxlen=CYCLE_PERIOD)  # the checked outputs of the latest stages
         last_stage: dict[str, np.ndarray] | None = None  # the flat outputs of the stage before, for the check
         latest: Latest = {}
         for stage in range(s.max_stages):
@@ -707,9 +713,10 @@ class Relaxation:
                     return Interval(times, outputs, inputs, stage + 1, history)
                 if self._give_up_early and _diverging(history, result.failing):  # retried shorter: no use going on
                     raise NotConverged(float(times[0]), float(times[-1]), stage + 1, result.failing, history)
-                if _cycling(history, result.failing):
+                back = _repeated(flat, seen)
+                if back:
                     raise NotConverged(float(times[0]), float(times[-1]), stage + 1, result.failing, history, flat,
-                                       cycled=True)
+                                       cycled=back)
             last_stage = flat
             inputs = {k: c.evaluate(outputs, w, n) for k, c, w in self._all}
         raise NotConverged(float(times[0]), float(times[-1]), s.max_stages, result.failing, history, last_stage)
@@ -719,6 +726,7 @@ class Relaxation:
         forward_into = self._forward_into
         fed_back = self._guess(times, self._feedback)
         history: dict[str, list[float]] = {}
+        seen: deque[dict[str, bytes]] = deque(maxlen=CYCLE_PERIOD)  # the fed-back signals of the latest stages
         last_stage: Outputs | None = None  # the outputs of the stage before (self._previous: of the interval before)
         self._tries += 1
         latest: Latest = {}
@@ -758,9 +766,10 @@ class Relaxation:
                     return Interval(times, outputs, inputs, stage + 1, history)
                 if self._give_up_early and _diverging(history, result.failing):  # retried shorter: no use going on
                     raise NotConverged(float(times[0]), float(times[-1]), stage + 1, result.failing, history)
-                if _cycling(history, result.failing):
+                back = _repeated(new, seen)
+                if back:
                     raise NotConverged(float(times[0]), float(times[-1]), stage + 1, result.failing, history, new,
-                                       cycled=True)
+                                       cycled=back)
             fed_back = new
         raise NotConverged(float(times[0]), float(times[-1]), s.max_stages, result.failing, history, fed_back)
 

@@ -79,16 +79,18 @@ class Variable:
     start: str | None
     unit: str
     description: str
-    low: float | None = None  # its declared min and max (the model description's, or its declared type's)
-    high: float | None = None
+    low: float | int | None = None  # its declared min and max (the model description's, or its declared type's)
+    high: float | int | None = None
 
 
-def _bound(v: Any, which: str) -> float | None:
+def _bound(v: Any, which: str) -> float | int | None:
+    """A variable's declared ``min`` or ``max`` (its own, else its declared type's): an int for an integer type (a
+    float would round a 64-bit one)."""
     raw = getattr(v, which, None)
     if raw is None and getattr(v, "declaredType", None) is not None:
         raw = getattr(v.declaredType, which, None)
     try:
-        return None if raw is None or isinstance(raw, bool) else float(raw)
+        return None if raw is None or isinstance(raw, bool) else int(raw) if v.type in INT_TYPES else float(raw)
     except (TypeError, ValueError):
         return None
 

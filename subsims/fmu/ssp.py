@@ -120,6 +120,17 @@ class _End:
         return fmu, self.connectors.get(connector) or fmu
 
 
+def _bind(params: dict[str, Any], variable: str, value: Any) -> None:
+    """An FMU variable's value in the FMU subsim's params: by its name, or in its ``values`` table where the name is
+    also one of the subsim's own settings (a variable named ``rtol`` must not set the solver's: a review)."""
+    from subsims.fmu.subsim import SETTINGS  # (the subsim module imports SciPy: only for an SSP)
+
+    if variable in SETTINGS:
+        params.setdefault("values", {})[variable] = value
+    else:
+        params[variable] = value
+
+
 def _bindings(element: ET.Element) -> list[ET.Element]:
     return [b for b in inner(element, "ParameterBindings") if local(b.tag) == "ParameterBinding"]
 
@@ -278,7 +289,7 @@ def read_ssp(path: str | Path) -> dict[str, Any]:
             for binding in _bindings(comp):
                 for _, variable, value in binding_values(binding, zf, where, ssd_units,
                                                          lambda n, c=name, m=model: (c, m, n)):
-                    params[variable] = value
+                    _bind(params, variable, value)
             interface = _interface(comp, model, where, source)
             if interface is not None:  # before the companion's params, which override it
                 params["interface"] = interface
@@ -289,7 +300,7 @@ def read_ssp(path: str | Path) -> dict[str, Any]:
             where = f"{path}: system {system_name!r}"
             for name, variable, value in binding_values(binding, zf, where, ssd_units,
                                                         partial(_in_system, ends, where)):
-                raw["subsims"][name]["params"][variable] = value
+                _bind(raw["subsims"][name]["params"], variable, value)
         for conn in (c for c in inner(system, "Connections") if local(c.tag) == "Connection"):
             raw["couplings"].append(_coupling(conn, ends, ssd_units, f"{path}: connection", system_name))
     if not raw["subsims"]:

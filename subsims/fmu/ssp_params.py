@@ -172,7 +172,8 @@ def _transformed(value: Any, transform: ET.Element, where: str) -> Any:
         except ValueError:
             raise ScenarioError(f"{where}: bad LinearTransformation (factor {transform.get('factor')!r}, offset "
                                 f"{transform.get('offset')!r})") from None
-        return factor * value + offset
+        mapped = factor * value + offset
+        return int(mapped) if type(value) is int and mapped.is_integer() else mapped  # (an Integer stays one)
     parse = _boolean if kind == "BooleanMappingTransformation" else int
     table = {}
     for entry in children(transform, "MapEntry"):

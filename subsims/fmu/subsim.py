@@ -203,9 +203,13 @@ class FmuSubsim(Subsim):
         # model exchange sets a discrete input only in event mode: once an interval, at its start (FMI: a discrete
         # input changes at events only); the continuous ones wherever the solver evaluates the FMU
         self._discrete_at = [i for i, v in enumerate(info.inputs) if v.variability == "discrete"]
-        self._continuous_at = [i for i, v in enumerate(info.inputs) if v.variability != "discrete"]
+        # (None: every input is continuous, taken as the input rows are, without a copy per right-hand side)
+        self._continuous_at = [i for i, v in enumerate(info.inputs) if v.variability != "discrete"] \
+            if self._discrete_at else None
+        self._f32_at = list(self._in_ports.f32_at)
         self._in_discrete = RealPorts.of(tuple(info.inputs[i] for i in self._discrete_at))
-        self._in_continuous = RealPorts.of(tuple(info.inputs[i] for i in self._continuous_at))
+        self._in_continuous = self._in_ports if self._continuous_at is None else RealPorts.of(
+            tuple(info.inputs[i] for i in self._continuous_at))
         _free(self._holder)
         try:
             inst = Instance(info, kind, self.name)
@@ -325,7 +329,7 @@ class FmuSubsim(Subsim):
     def _in_float32_range(self, inputs: np.ndarray, points: np.ndarray) -> np.ndarray:
         """``inputs``, unless one for a Float32 input is beyond Float32's range: that FMU input would be inf (and
         its outputs blamed for it: an FMI probe)."""
-        at = list(self._in_ports.f32_at)
+        at = self._f32_at
         if at and not (np.abs(inputs[:, at]) <= F32_MAX).all():
             row, col = np.argwhere(~(np.abs(inputs[:, at]) <= F32_MAX))[0]
             raise ModelError(f"input {self.info.inputs[at[col]].name} = {float(inputs[row, at[col]])!r} at t = "
@@ -365,7 +369,8 @@ class FmuSubsim(Subsim):
 
         def at(t: float, x: np.ndarray) -> None:  # the FMU at time t, in state x, with the inputs there
             inst.set_time(t)
-            inst.set_reals(self._in_continuous, self._input_matrix(u, np.array([t]))[0][continuous])
+            row = self._input_matrix(u, np.array([t]))[0]
+            inst.set_reals(self._in_continuous, row if continuous is None else row[continuous])
             inst.set_states(x)
 
         def rhs(t: float, x: np.ndarray) -> np.ndarray:
@@ -385,7 +390,7 @@ class FmuSubsim(Subsim):
         out = np.empty((times.size, len(self._out_ports.vrs)))
         for i, t in enumerate(times):
             inst.set_time(float(t))
-            inst.set_reals(self._in_continuous, inputs[i][continuous])
+            inst.set_reals(self._in_continuous, inputs[i] if continuous is None else inputs[i][continuous])
             if n:
                 inst.set_states(states[:, i])
             out[i] = inst.get_reals(self._out_ports)
