@@ -263,6 +263,7 @@ def _roundoff(failing: Sequence[str], residuals: Mapping[str, list[float]], valu
 
 
 CYCLE_PERIOD = 4  # stages: an iteration whose checked signals come back bit for bit within this many is a cycle
+CYCLE_FROM = 4  # the stage from which they are looked at (an interval that converges in fewer pays nothing for it)
 
 
 def _repeated(values: Mapping[str, np.ndarray], seen: deque[dict[str, bytes]]) -> int:
@@ -713,7 +714,7 @@ class Relaxation:
                     return Interval(times, outputs, inputs, stage + 1, history)
                 if self._give_up_early and _diverging(history, result.failing):  # retried shorter: no use going on
                     raise NotConverged(float(times[0]), float(times[-1]), stage + 1, result.failing, history)
-                back = _repeated(flat, seen)
+                back = _repeated(flat, seen) if stage >= CYCLE_FROM else 0
                 if back:
                     raise NotConverged(float(times[0]), float(times[-1]), stage + 1, result.failing, history, flat,
                                        cycled=back)
@@ -766,7 +767,7 @@ class Relaxation:
                     return Interval(times, outputs, inputs, stage + 1, history)
                 if self._give_up_early and _diverging(history, result.failing):  # retried shorter: no use going on
                     raise NotConverged(float(times[0]), float(times[-1]), stage + 1, result.failing, history)
-                back = _repeated(new, seen)
+                back = _repeated(new, seen) if stage >= CYCLE_FROM else 0
                 if back:
                     raise NotConverged(float(times[0]), float(times[-1]), stage + 1, result.failing, history, new,
                                        cycled=back)
