@@ -103,7 +103,9 @@ KEYS: dict[str, dict[str, Key]] = {
         "interp": Key("string", '"linear"', "", "input interpolation: 'linear', 'cubic' or 'lagrange'"),
         "tol": Key("number", "1e-10", "1", "relative convergence tolerance (of the newest stage's span)"),
         "res": Key("number", "1e-12", "signal unit", "absolute convergence tolerance"),
-        "max_stages": Key("integer", "100", "", "stages before an interval counts as not converged"),
+        "max_stages": Key("integer", "100", "", "stages before an interval counts as not converged (sooner when, "
+                          "from the fifth stage on, its signals come back bit for bit to those of up to 4 stages "
+                          "before: a cycle that would go round to the limit)"),
         "order": Key("list of strings", "derived", "", "distributed execution order; every subsim once"),
         "max_halvings": Key("integer", "0", "", "times a non-converging interval is retried shorter: on its "
                             "first half, then its first quarter, ...; not used with interval = 'auto', which "
