@@ -81,6 +81,7 @@ class Variable:
     description: str
     low: float | int | None = None  # its declared min and max (the model description's, or its declared type's)
     high: float | int | None = None
+    items: tuple[tuple[str, int], ...] = ()  # an Enumeration's items (name, value), from its declared type
 
 
 def _bound(v: Any, which: str) -> float | int | None:
@@ -180,6 +181,15 @@ def _settable(v: Any, major: int) -> bool:
     return v.start is not None and v.initial in {"exact", "approx"} and v.causality in {"local", "output"}
 
 
+def _items(v: Any) -> tuple[tuple[str, int], ...]:
+    """An Enumeration variable's items, (name, value), from its declared type (none if they cannot be read)."""
+    declared = getattr(v, "declaredType", None)
+    try:
+        return tuple((str(i.name), int(i.value)) for i in getattr(declared, "items", None) or ())
+    except (TypeError, ValueError):
+        return ()
+
+
 def _a(word: str) -> str:
     """``word`` with its indefinite article: 'an Integer', 'a Float64'."""
     return f"{'an' if word[:1].lower() in 'aeiou' else 'a'} {word}"
@@ -253,7 +263,8 @@ def read_fmu(path: str | os.PathLike) -> FmuInfo:
     )
     settable = {
         v.name: Variable(v.name, v.valueReference, v.type, v.causality, v.variability, v.initial, v.start,
-                         v.unit or "", v.description or "", _bound(v, "min"), _bound(v, "max"))
+                         v.unit or "", v.description or "", _bound(v, "min"), _bound(v, "max"),
+                         _items(v) if v.type == "Enumeration" else ())
         for v in md.modelVariables if _settable(v, major)
     }
     return FmuInfo(
@@ -330,6 +341,12 @@ def _typed(var: Variable, value: Any, major: int) -> Any:
         if ok:
             return float(value)
         raise FmuError(f"{var.name} is {var.type}: needs a finite number, got {value!r}")
+    if var.type == "Enumeration" and isinstance(value, str):  # an item by its name (as an SSP or a user gives it)
+        by_name = dict(var.items)
+        if value not in by_name:
+            known = ", ".join(f"{n} ({v})" for n, v in var.items) or "none declared"
+            raise FmuError(f"{var.name} is an Enumeration: {value!r} is none of its items, {known}")
+        value = by_name[value]
     if var.type in INT_TYPES:
         if isinstance(value, int) and not isinstance(value, bool):
             low, high = _int_range(var.type, major)

@@ -203,7 +203,9 @@ def _value(param: ET.Element, name: str, where: str) -> tuple[Any, str | None]:
         try:
             if kind in REAL_KINDS:
                 return float(raw), typed.get("unit") or None
-            if kind in {"Integer", "Enumeration"} or kind.startswith(("Int", "UInt")):
+            if kind == "Enumeration":  # SSP gives an item by its name; the FMU subsim takes it so, or its number
+                return (int(raw) if raw.lstrip("+-").isdigit() else raw), None
+            if kind == "Integer" or kind.startswith(("Int", "UInt")):
                 return int(raw), None
             if kind == "Boolean":
                 return _boolean(raw), None

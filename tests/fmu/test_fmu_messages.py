@@ -130,6 +130,36 @@ def test_a_value_outside_the_declared_min_and_max_is_refused(fmus: dict[str, Pat
         Runtime(FmuSubsim).configure({"fmu": str(bounded), "m": m})
 
 
+def test_an_enumeration_is_given_by_an_item_name_or_its_number(fmus: dict[str, Path], tmp_path: Path) -> None:
+    """An Enumeration given by its item's name ("Option2", as a user and an SSP's .ssv give it) was refused: an
+    integer was required (an FMI probe). The name is taken as its item's value; another name is refused listing the
+    items."""
+    import zipfile
+
+    from subsims.fmu.fmu import FmuError, coerce
+
+    with zipfile.ZipFile(fmus["mass2"]) as zf:
+        members = {n: zf.read(n) for n in zf.namelist()}
+    xml = members["modelDescription.xml"].decode()
+    speeds = ('<TypeDefinitions><SimpleType name="Speed"><Enumeration><Item name="Slow" value="1"/>'
+              '<Item name="Fast" value="2"/></Enumeration></SimpleType></TypeDefinitions>')
+    xml = xml.replace("</UnitDefinitions>", "</UnitDefinitions>" + speeds)
+    xml = xml.replace("</ModelVariables>", '<ScalarVariable name="speed" valueReference="20" causality="parameter" '
+                      'variability="fixed" initial="exact"><Enumeration declaredType="Speed" start="1"/>'
+                      "</ScalarVariable></ModelVariables>")
+    members["modelDescription.xml"] = xml.encode()
+    variant = tmp_path / "speeds.fmu"
+    with zipfile.ZipFile(variant, "w") as zf:
+        for name, data in members.items():
+            zf.writestr(name, data)
+    speed = read_fmu(variant).settable["speed"]
+    assert speed.items == (("Slow", 1), ("Fast", 2))
+    assert coerce(speed, "Fast", 2) == 2 and coerce(speed, 1, 2) == 1
+    with pytest.raises(FmuError) as err:
+        coerce(speed, "Medium", 2)
+    assert str(err.value) == "speed is an Enumeration: 'Medium' is none of its items, Slow (1), Fast (2)"
+
+
 def test_variables_cosim_does_not_use_are_listed_and_named_when_given(fmus: dict[str, Path]) -> None:
     info = read_fmu(fmus["mass3_extras"])
     assert info.summary()["not_used"] == {

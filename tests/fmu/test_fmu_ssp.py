@@ -261,7 +261,8 @@ def test_a_parameter_mapping_renames_and_transforms_values(tmp_path: Path, fmus:
     rows = ('<ssv:Parameter name="on"><ssv:Boolean value="true"/></ssv:Parameter>'
             '<ssv:Parameter name="gear"><ssv:Integer value="2"/></ssv:Parameter>'
             '<ssv:Parameter name="teeth"><ssv:Integer value="3"/></ssv:Parameter>'
-            '<ssv:Parameter name="rtol"><ssv:Real value="0.001"/></ssv:Parameter>')
+            '<ssv:Parameter name="rtol"><ssv:Real value="0.001"/></ssv:Parameter>'
+            '<ssv:Parameter name="mode"><ssv:Enumeration value="Fast"/></ssv:Parameter>')
     values = parameter_set({"stiffness": 20.0, "mass": 1.5, "u0": 0.1}).replace("</ssv:Parameters>",
                                                                                 f"{rows}</ssv:Parameters>")
     ssm = mapping(entries, inline=False).replace("<ssm:ParameterMapping ", f'<ssm:ParameterMapping xmlns:ssc="{SSC}" ')
@@ -273,7 +274,8 @@ def test_a_parameter_mapping_renames_and_transforms_values(tmp_path: Path, fmus:
     # (an Integer through a linear map stays an integer; a variable named as a subsim setting, rtol, goes in the
     # values table, not over the solver's rtol: a review)
     params = raw_params(read_ssp(ssp), "mass1")
-    assert params == {"k": 41.0, "m": 1.5, "u0": 0.1, "flag": False, "n": 20, "z": 6, "values": {"rtol": 0.001}}
+    assert params == {"k": 41.0, "m": 1.5, "u0": 0.1, "flag": False, "n": 20, "z": 6, "values": {"rtol": 0.001},
+                      "mode": "Fast"}  # (an Enumeration by its item's name: the FMU subsim takes it so)
     assert type(params["z"]) is int
 
 
