@@ -47,14 +47,10 @@ def _run(args: argparse.Namespace) -> int:
         if state["t"] is not None and state["output"] is not None:
             point = _resume_time(Path(state["output"]))
             kept = _kept(Path(state["output"]))
-            stop = state.get("stop")
-            if kept is not None and stop is not None and state["t"] >= stop - 1e-9 * max(1.0, abs(stop)):
+            if kept is not None and _at_stop(state):
                 # every interval is in: only the results' last step failed (an NPZ built from its stream); a resume
                 # point would be refused, "nothing to resume" (a red team)
-                try:
-                    resume_path(Path(state["output"])).unlink(missing_ok=True)
-                except OSError:  # (a read-only directory: the note below is what matters)
-                    pass
+                _drop_resume_point(Path(state["output"]))
                 exc.add_note(f"every interval to t = {state['t']:.6g} s, the run's stop, is in {kept}: nothing is "
                              "left to run")
             elif point is not None and kept is not None:  # (a results file removed meanwhile is not there to go on)
@@ -66,9 +62,9 @@ def _run(args: argparse.Namespace) -> int:
                              "runs it again from the start")
         raise
     except interrupt.Interrupted as exc:
-        stop, t = state.get("stop"), state["t"]
-        if t is not None and stop is not None and t >= stop - 1e-9 * max(1.0, abs(stop)):  # only its end was left
-            resume_path(Path(state["output"])).unlink(missing_ok=True)  # (its subsims' last commit): it is whole
+        t = state["t"]
+        if _at_stop(state):  # only its end was left
+            _drop_resume_point(Path(state["output"]))  # (its subsims' last commit): it is whole
             say(f"cosim: {exc.name} came as the run finished; every interval to t = {t:.6g} s is in {state['output']}")
             _summary(f"results: {state['output']}\ndiagnostics: {diag_path(Path(state['output']))}")  # as a run's end
             return 0
@@ -81,6 +77,21 @@ def _run(args: argparse.Namespace) -> int:
             where += f" (go on with the same command {_with_resume(args)})"
         say(f"cosim: stopped by {exc.name} {where}")  # (its terminal may be gone: the status still says it)
         return exc.exit_status
+
+
+def _at_stop(state: dict) -> bool:
+    """Whether the run's committed intervals reach its stop (``state``: its last committed time and its stop)."""
+    t, stop = state["t"], state.get("stop")
+    return t is not None and stop is not None and t >= stop - 1e-9 * max(1.0, abs(stop))
+
+
+def _drop_resume_point(output: Path) -> None:
+    """Remove the resume point of a run whose every interval is in; one a read-only directory keeps is left (the
+    line said about the run is what matters, not a traceback)."""
+    try:
+        resume_path(output).unlink(missing_ok=True)
+    except OSError:
+        pass
 
 
 def _summary(text: str) -> None:
