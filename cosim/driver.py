@@ -23,7 +23,7 @@ from typing import Any, NoReturn, TypeVar
 import numpy as np
 
 from cosim.contract import SubsimDied, SubsimError, SubsimHung, SubsimLeft
-from cosim.coupler.couplings import Coupling, check_units
+from cosim.coupler.couplings import Coupling, CouplingError, check_units
 from cosim.coupler.plan import Plan
 from cosim.coupler.relaxation import (
     Commit,
@@ -143,10 +143,24 @@ def plan_for(
     """The coupling plan of described subsims (raises ``CouplingError`` naming the first bad coupling)."""
     inputs = {n: {p: port.size for p, port in d.inputs.items()} for n, d in descriptions.items()}
     outputs = {n: {p: port.size for p, port in d.outputs.items()} for n, d in descriptions.items()}
-    plan = Plan.build(inputs, outputs, couplings, settings.method, settings.order)
+    try:
+        plan = Plan.build(inputs, outputs, couplings, settings.method, settings.order)
+    except CouplingError as exc:  # a port the subsim has as a variable it cannot couple: say why
+        why = _no_port(couplings[exc.index], descriptions) if 0 <= exc.index < len(couplings) else ""
+        if not why:
+            raise
+        raise CouplingError(exc.index, f"{exc} ({why})") from None
     check_units(couplings, {n: {p: port.unit for p, port in d.inputs.items()} for n, d in descriptions.items()},
                 {n: {p: port.unit for p, port in d.outputs.items()} for n, d in descriptions.items()})
     return plan
+
+
+def _no_port(coupling: Coupling, descriptions: Mapping[str, Description]) -> str:
+    """Why the ends of ``coupling`` that are no ports of their subsims are not, as those subsims say."""
+    ends = (coupling.target, *coupling.sources)
+    reasons = [f"{end} is {why}" for end in ends if end.subsim in descriptions
+               and (why := descriptions[end.subsim].not_ports.get(end.port))]
+    return "; ".join(dict.fromkeys(reasons))
 
 
 class Coordinator:

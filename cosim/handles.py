@@ -34,6 +34,7 @@ class Description:
     protocol: int
     params: dict[str, Param] = field(default_factory=dict)  # declared parameters (optional in a reply)
     code: dict[str, str] = field(default_factory=dict)  # module -> digest of its file (cosim.importing.code_digests)
+    not_ports: dict[str, str] = field(default_factory=dict)  # variable -> why it is no port (optional in a reply)
 
     @classmethod
     def from_result(cls, r: Mapping[str, Any]) -> Description:
@@ -44,7 +45,7 @@ class Description:
             r["name"], r["model"], ports(r["inputs"]), ports(r["outputs"]), r["algebraic"], r["configured"],
             r.get("time"), r["history_limit"], r["protocol"],
             {k: Param(p.get("default"), p.get("unit", ""), p.get("doc", "")) for k, p in r.get("params", {}).items()},
-            dict(r.get("code", {})),
+            dict(r.get("code", {})), dict(r.get("not_ports", {})),
         )
 
 

@@ -309,6 +309,7 @@ class Runtime:
             "protocol": PROTOCOL_VERSION,
             "params": {k: {"default": p.default, "unit": p.unit, "doc": p.doc} for k, p in self.model.params.items()},
             "code": code_digests(type(self.model).__module__),
+            **({"not_ports": dict(self.model.not_ports)} if self.model.not_ports else {}),
         }
 
     def configure(self, params: Mapping[str, Any], t0: float = 0.0) -> dict:

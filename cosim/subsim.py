@@ -150,6 +150,8 @@ class Subsim:
     - ``caches``: names of attributes ``advance`` fills with results that depend on its arguments only (a memo of
       matrix exponentials by step, say). ``advance`` must be pure; the runtime refuses a model whose attributes
       change in its first runs, but for these (``cosim.check_pure`` skips them too).
+    - ``not_ports``: ``{name: why}`` of variables the model has that are no ports (an FMU's Integer output, say):
+      a coupling naming one is refused with that reason instead of "has no output" alone.
     """
 
     name: ClassVar[str] = "subsim"
@@ -158,6 +160,7 @@ class Subsim:
     algebraic: ClassVar[bool] = False
     params: ClassVar[Mapping[str, Param]] = {}
     caches: ClassVar[tuple[str, ...]] = ()
+    not_ports: Mapping[str, str] = {}
 
     def initial_state(self, params: Mapping[str, Any]) -> np.ndarray:
         """Read parameters (keep what ``advance`` needs on ``self``); return the state at t0.

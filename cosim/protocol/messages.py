@@ -62,6 +62,7 @@ DESCRIPTION_FIELDS: Fields = {
     "protocol": (t_int, True),
     "params": (t_param_decls, False),
     "code": (t_str_map, False),
+    "not_ports": (t_str_map, False),
 }
 
 REQUESTS: dict[str, Fields] = {

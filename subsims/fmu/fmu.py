@@ -190,7 +190,7 @@ def _items(v: Any) -> tuple[tuple[str, int], ...]:
         return ()
 
 
-def _a(word: str) -> str:
+def with_article(word: str) -> str:
     """``word`` with its indefinite article: 'an Integer', 'a Float64'."""
     return f"{'an' if word[:1].lower() in 'aeiou' else 'a'} {word}"
 
@@ -202,9 +202,9 @@ def _unused(v: Any) -> str | None:
     if v.dimensions:
         return f"an array ({v.type} with dimensions): arrays are not supported"
     if v.causality == "output" and v.type not in REAL_TYPES:
-        return f"{_a(v.type)} output: only real outputs are ports"
+        return f"{with_article(v.type)} output: only real outputs are ports"
     if v.causality in {"input", "parameter"} and v.type in {"Binary", "Clock"}:
-        return f"{_a(v.type)} {v.causality}: {v.type} variables are not supported"
+        return f"{with_article(v.type)} {v.causality}: {v.type} variables are not supported"
     return None
 
 

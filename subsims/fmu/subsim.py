@@ -38,7 +38,17 @@ import numpy as np
 from scipy.integrate import BDF, DOP853, LSODA, RK23, RK45, Radau
 
 from cosim.subsim import InputFunction, IntervalTooLong, ModelError, Port, Subsim, closest
-from subsims.fmu.fmu import FmiCallError, FmuError, FmuInfo, Instance, RealPorts, coerce, read_fmu
+from subsims.fmu.fmu import (
+    REAL_TYPES,
+    FmiCallError,
+    FmuError,
+    FmuInfo,
+    Instance,
+    RealPorts,
+    coerce,
+    read_fmu,
+    with_article,
+)
 
 SETTINGS = {"fmu", "interface", "substeps", "solver", "rtol", "atol", "max_step", "tolerance", "state_capacity",
             "start_time", "values"}
@@ -142,6 +152,10 @@ class FmuSubsim(Subsim):
     def _set_ports(self, info: FmuInfo) -> None:
         self.inputs = {v.name: Port(1, v.unit, v.description) for v in info.inputs}
         self.outputs = {v.name: Port(1, v.unit, v.description) for v in info.outputs}
+        held = {v.name: f"{with_article(v.type)} input: only real inputs are ports; give it a value among the "
+                "subsim's params (held for the whole run)" for v in info.settable.values()
+                if v.causality == "input" and v.type not in REAL_TYPES}
+        self.not_ports = {**held, **info.unused}  # (said when a coupling names one)
 
     # --- configure --------------------------------------------------------------------------------
 

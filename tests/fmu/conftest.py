@@ -51,13 +51,15 @@ def fmus(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     built["mass2_alias"] = build_mass.write_fmu(out / "mass2_alias.fmu",
                                                 xml.replace("</ModelVariables>", alias + "</ModelVariables>"),
                                                 {build_mass.PLATFORM[2]: so})
-    # FMI 3 variables cosim neither couples nor sets: an array parameter, an array input, an Int32 output
+    # FMI 3 variables cosim neither couples nor sets: an array parameter, an array input, an Int32 output (and an Int32
+    # input, set as a value, not coupled)
     extras = ('<Float64 name="gains" valueReference="20" causality="parameter" variability="fixed" start="1 2">'
               '<Dimension start="2"/></Float64>'
               '<Float64 name="bias" valueReference="21" causality="input" variability="continuous" start="0 0">'
               '<Dimension start="2"/></Float64>'
               '<Int32 name="count" valueReference="22" causality="output" variability="discrete"/>'
               '<Int32 name="mode" valueReference="23" causality="parameter" variability="fixed" start="0"/>'
+              '<Int32 name="gear" valueReference="27" causality="input" variability="discrete" start="1"/>'
               '<UInt64 name="rows" valueReference="26" causality="structuralParameter" variability="fixed" '
               'start="2"/>'
               '<UInt8 name="level" valueReference="24" causality="parameter" variability="fixed" start="0"/>'

@@ -9,6 +9,12 @@ import numpy as np
 import pytest
 
 from cosim.contract import CosimError, SubsimError
+from cosim.coupler.couplings import Coupling, CouplingError
+from cosim.coupler.relaxation import Settings
+from cosim.driver import plan_for
+from cosim.handles import Description
+from cosim.protocol.messages import decode_reply, encode_request
+from cosim.protocol.service import answer
 from cosim.results import read_results
 from cosim.runtime import Runtime
 from subsims.fmu.fmu import LOG_SHOWN, FmiCallError, FmuError, Instance, Variable, coerce, read_fmu
@@ -177,6 +183,32 @@ def test_variables_cosim_does_not_use_are_listed_and_named_when_given(fmus: dict
     with pytest.raises(CosimError) as err:
         Runtime(FmuSubsim).configure({"fmu": str(fmus["mass3_extras"]), "rows": 3})
     assert "rows in mass3_extras.fmu is a structural parameter (UInt64)" in err.value.message, err.value.message
+
+
+def test_a_coupling_naming_a_variable_that_is_no_port_says_why(fmus: dict[str, Path]) -> None:
+    """An Int32 output or input of an FMU is no port: a coupling naming one was refused as "has no output 'count'"
+    (the user sees the variable in the FMU; an FMI probe). The reason travels in describe's not_ports, over the wire
+    too."""
+    rt = Runtime(FmuSubsim, name="box")
+    rt.configure({"fmu": str(fmus["mass3_extras"])})
+    described = decode_reply("describe", answer(rt, encode_request("describe")))
+    box = Description.from_result(described)
+    assert box.not_ports["count"] == "an Int32 output: only real outputs are ports"
+    assert box.not_ports["gear"].startswith("an Int32 input: only real inputs are ports; give it a value among")
+    assert "u" not in box.not_ports and "F" not in box.not_ports
+    other = Description.from_result({**described, "name": "other", "not_ports": {}})
+    settings = Settings(method="distributed")
+    with pytest.raises(CouplingError) as err:
+        plan_for({"box": box, "other": other}, [Coupling.make("other.F", "box.count")], settings)
+    assert str(err.value) == ("coupling box.count -> other.F: 'box' has no output 'count' (outputs: u, v) "
+                              "(box.count is an Int32 output: only real outputs are ports)")
+    with pytest.raises(CouplingError) as err:
+        plan_for({"box": box, "other": other}, [Coupling.make("box.gear", "other.u")], settings)
+    assert "(box.gear is an Int32 input: only real inputs are ports; give it a value among the subsim's params" \
+        in str(err.value), str(err.value)
+    with pytest.raises(CouplingError) as err:  # a name that is nothing: as before
+        plan_for({"box": box, "other": other}, [Coupling.make("other.F", "box.nothing")], settings)
+    assert str(err.value) == "coupling box.nothing -> other.F: 'box' has no output 'nothing' (outputs: u, v)"
 
 
 def test_an_alias_and_its_variable_given_together_are_refused(fmus: dict[str, Path]) -> None:
