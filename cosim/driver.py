@@ -532,7 +532,8 @@ class Coordinator:
         charged = self._cost([why]) > 0
         if charged and getattr(why, "pause", None) is not None:
             self._pauses.append(why.pause)  # type: ignore[attr-defined]
-        how = "left" if isinstance(why, SubsimLeft) else "died" if isinstance(why, SubsimDied) else "hung"
+        how = "left" if isinstance(why, SubsimLeft) else "hung" if not isinstance(why, SubsimDied) else \
+            "died" if getattr(self.handles[name], "exit_status", None) is not None else "is gone"  # (external: how?)
         reason = f"{how} ({why})"
         self.handles[name].close()
         while True:

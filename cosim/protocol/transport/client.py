@@ -408,7 +408,7 @@ class RemoteHandle(SubsimHandle):
         """Why its liveliness token went, for a process not known to have exited: it may not have."""
         when = " during the request" if during else ""
         why = " while its process still runs: its link" if self.exit_status is not None else \
-            ": the process died, or its link"
+            ": the process ended (Ctrl-C at its terminal, a kill, a crash), or its link"
         return f"its liveliness token went{when}{why} was silent for longer than its {self.lease:g} s lease (cut, or " \
                "the process stopped)"
 
