@@ -50,7 +50,8 @@ def _model_exception(where: str, exc: BaseException) -> CosimError:
                       _model_frames(exc))
 
 
-ATTRIBUTES_WATCHED = 3  # run_intervals after a configure whose model attributes are compared before and after
+ATTRIBUTES_WATCHED = 3  # run_intervals after a configure whose model attributes are compared with the configured ones
+WATCH_EVERY = 16  # and after those, every this many (a mode flag on self that latches late; a few us a run)
 
 
 VALUES = (bool, int, float, complex, str, bytes, tuple, frozenset, type(None))  # compared by value
@@ -156,6 +157,16 @@ def _same(a: Any, b: Any) -> bool:
         return False
 
 
+def _same_bits(again: Any, outputs: Mapping[str, np.ndarray], end_state: np.ndarray) -> bool:
+    """Whether ``again``, what advance() returned a second time, holds the bits of the checked first answer."""
+    try:
+        out, end = again
+        return out.keys() == outputs.keys() and np.asarray(end, dtype=np.float64).tobytes() == end_state.tobytes() \
+            and all(np.asarray(out[k], dtype=np.float64).tobytes() == v.tobytes() for k, v in outputs.items())
+    except (TypeError, ValueError, AttributeError):  # not even of the first answer's form
+        return False
+
+
 def float_samples(port: str, value: Any) -> np.ndarray:
     """Input samples as float64, or a ``bad_value`` CosimError naming ``inputs.<port>``: nothing that is no array of
     real numbers (a complex one included: a cast would drop its imaginary part with only a warning)."""
@@ -258,7 +269,10 @@ class Runtime:
         self.epoch = 0
         self.requests = 0
         self.shutdown_requested = False
-        self._attributes_watched = 0  # run_intervals left whose model attributes are compared (set by configure)
+        self._configured_marks: dict[str, Any] | None = None  # the model's attributes as configure left them
+        self._runs = 0  # run_intervals since the configure
+        self._watched_until: float | None = None  # the end of the latest run whose attributes were compared
+        self._rerun_checked = True  # whether a run since the configure was repeated and gave the same bits
         # told of every error the model caused (model_error, model_exception), e.g. to show it to the model's
         # owner at the subsim's own terminal as well as in the coordinator's reply
         self.on_model_error: Callable[[str, CosimError], None] | None = None
@@ -348,7 +362,8 @@ class Runtime:
         self.model, self.inputs, self.outputs = model, inputs, outputs
         self._set_committed(t0, state)
         self.history.clear()
-        self._attributes_watched = ATTRIBUTES_WATCHED
+        self._configured_marks = _attribute_marks(model) if hasattr(model, "__dict__") else None
+        self._runs, self._watched_until, self._rerun_checked = 0, None, False
         return self.describe()
 
     def run_interval(self, t: Any, inputs: Mapping[str, Any], interp: str = "linear", commit: bool = False) -> dict:
@@ -376,26 +391,10 @@ class Runtime:
         except ValueError as exc:
             raise CosimError("bad_value", f"interp: {exc}") from None
         u = self._input_function(times, inputs, interp)
-        watched = self._attributes_watched > 0 and hasattr(self.model, "__dict__")
-        before = _attribute_marks(self.model) if watched else None
-        try:
-            result = self.model.advance(state, times, u)
-        except IntervalTooLong as exc:
-            raise CosimError("too_long", f"at t in [{times[0]}, {times[-1]}]: {exc}") from None
-        except ModelError as exc:
-            raise CosimError("model_error", f"at t in [{times[0]}, {times[-1]}]: {exc}") from None
-        except Exception as exc:
-            raise _model_exception("advance", exc) from None
-        if before is not None:
-            self._attributes_watched -= 1
-            changed = _changed_attributes(before, _attribute_marks(self.model))
-            if changed:  # what evolves there is not rolled back, and a repeated stage integrates it again
-                raise CosimError("model_error", f"advance() changed the model's attribute(s) {changed} (over t in "
-                                 f"[{times[0]:g}, {times[-1]:g}]): what evolves belongs in the state vector, which "
-                                 "a rollback or a repeated stage restores; advance() must depend on its arguments "
-                                 "only (what it computes once, initial_state() may keep on self; a cache of pure "
-                                 "results it fills is declared: caches = ('name',); cosim.check_pure tests a model "
-                                 "for this)")
+        result = self._advance(state, times, u)
+        self._runs += 1
+        if self._configured_marks is not None and (self._runs <= ATTRIBUTES_WATCHED or self._runs % WATCH_EVERY == 0):
+            self._watch_attributes(times)
         if type(result) is not tuple or len(result) != 2:
             got = f"a tuple of {len(result)}" if isinstance(result, tuple) else type(result).__name__
             raise CosimError("model_error", f"advance() must return (outputs, end_state), got {got}")
@@ -403,11 +402,54 @@ class Runtime:
         checked = self._check_outputs(outputs, times)
         end_state = self._check_state(end_state, state.size, "the end state advance() returned", from_model=True,
                                       over=times)
+        if not self._rerun_checked:
+            self._check_rerun(state, times, u, checked, end_state)
         if trial is not None:
             self._commit(trial)
         end = float(times[-1])
         self.trial = _Trial(self.epoch, end, end_state)
         return {"t": times, "outputs": checked, "end_time": end}
+
+    def _advance(self, state: np.ndarray, times: np.ndarray, u: Callable) -> Any:
+        try:
+            return self.model.advance(state, times, u)
+        except IntervalTooLong as exc:
+            raise CosimError("too_long", f"at t in [{times[0]}, {times[-1]}]: {exc}") from None
+        except ModelError as exc:
+            raise CosimError("model_error", f"at t in [{times[0]}, {times[-1]}]: {exc}") from None
+        except Exception as exc:
+            raise _model_exception("advance", exc) from None
+
+    def _watch_attributes(self, times: np.ndarray) -> None:
+        """Refuse a model whose attributes are no longer what configure left (but the caches it declares): what
+        evolves there is not rolled back, and a repeated stage integrates it again."""
+        assert self._configured_marks is not None
+        changed = _changed_attributes(self._configured_marks, _attribute_marks(self.model))
+        since, self._watched_until = self._watched_until, float(times[-1])
+        if not changed:
+            return
+        when = (f"over t in [{times[0]:g}, {times[-1]:g}]" if self._runs <= ATTRIBUTES_WATCHED else
+                f"found over t in [{times[0]:g}, {times[-1]:g}], in one of the runs since the look at t = {since:g}")
+        raise CosimError("model_error", f"advance() changed the model's attribute(s) {changed} ({when}): what "
+                         "evolves belongs in the state vector, which a rollback or a repeated stage restores; "
+                         "advance() must depend on its arguments only (what it computes once, initial_state() may keep "
+                         "on self; a cache of pure results it fills is declared: caches = ('name',); cosim.check_pure "
+                         "tests a model for this)")
+
+    def _check_rerun(self, state: np.ndarray, times: np.ndarray, u: Callable, outputs: Mapping[str, np.ndarray],
+                     end_state: np.ndarray) -> None:
+        """The first run after a configure is made twice: the second must give the same bits. A model that steps a
+        helper object of its own (a legacy simulation's instance), or a module-level variable, passes the attribute
+        check (a helper object may be reloaded from the state each time, which is right) but not this."""
+        if not _same_bits(self._advance(state, times, u), outputs, end_state):
+            raise CosimError("model_error", "advance() gave another answer when called again on the same "
+                             f"state, times and inputs (over t in [{times[0]:g}, {times[-1]:g}], the first run after "
+                             "configure, made twice to check this): it keeps something between calls outside the state "
+                             "vector (a helper object it steps, a module-level variable, a random generator?); every "
+                             "stage and every rollback runs advance() again from the committed state, so all that "
+                             "evolves belongs in the state vector (docs/tutorial.md, 'Wrapping an existing "
+                             "simulation')")
+        self._rerun_checked = True
 
     def commit(self) -> dict:
         self._require_configured()

@@ -352,3 +352,98 @@ def test_a_write_into_the_state_given_says_to_change_a_copy() -> None:
     assert err.value.code == "model_exception"
     assert str(err.value).endswith("the state and inputs advance() is given are read-only; change a copy "
                                    "(x = state.copy())"), err.value
+
+
+class _LegacyPanel:
+    """A stand-alone simulation as engineering code has it: a class whose step() changes its own attributes."""
+
+    def __init__(self, temperature: float) -> None:
+        self.temperature = temperature
+
+    def step(self, dt: float, power: float) -> None:
+        self.temperature += dt * (power - 0.1 * self.temperature)
+
+
+class _SteppedHelper(Subsim):
+    """The natural wrapper of it (a legacy-code probe): the helper object is made in initial_state and stepped in
+    advance. The attribute check looks at the helper as itself (it may be reloaded from the state, which is right),
+    so a coupled run went on with results 7 K off."""
+
+    inputs = {"power": Port(1)}
+    outputs = {"T": Port(1)}
+
+    def initial_state(self, params):
+        self.panel = _LegacyPanel(20.0)
+        return np.array([20.0])
+
+    def advance(self, state, times, u):
+        out = [self.panel.temperature]
+        for t0, t1 in zip(times[:-1], times[1:]):
+            self.panel.step(float(t1 - t0), float(u(t0)["power"][0]))
+            out.append(self.panel.temperature)
+        return {"T": np.array(out)}, np.array([self.panel.temperature])
+
+
+class _ReloadedHelper(_SteppedHelper):
+    """The right wrapper: the helper object is set from the state at each call, and stepped."""
+
+    def advance(self, state, times, u):
+        self.panel.temperature = float(state[0])
+        return super().advance(state, times, u)
+
+
+_STEPS = {"count": 0}  # a module-level variable a model steps
+
+
+class _ModuleCounter(_Cached):
+    def advance(self, state, times, u):
+        _STEPS["count"] += 1
+        return {"x": np.full((times.size, 1), float(_STEPS["count"]))}, state
+
+
+class _LateLatch(_Cached):
+    """A mode flag on self that latches once a level is passed, late in the run (a legacy-code probe: the attribute
+    check looked at the first three runs only, and the run went on with the flag carried across rollbacks)."""
+
+    def initial_state(self, params):
+        self.saturated = False
+        return np.zeros(1)
+
+    def advance(self, state, times, u):
+        if times[-1] > 4.0:
+            self.saturated = True
+        return {"x": np.full((times.size, 1), 2.0 if self.saturated else 1.0)}, state
+
+
+@pytest.mark.parametrize("model", [_SteppedHelper, _ModuleCounter])
+def test_a_model_keeping_state_outside_its_attributes_is_refused_at_its_first_run(model: type[Subsim]) -> None:
+    h = InProcessHandle(model(), "m")
+    h.configure({})
+    port = next(iter(model.inputs))
+    with pytest.raises(SubsimError) as err:
+        h.run_interval(np.linspace(0.0, 0.4, 3), {port: np.ones((3, 1))})
+    assert err.value.code == "model_error", err.value
+    assert ("advance() gave another answer when called again on the same state, times and inputs (over t in [0, 0.4], "
+            "the first run after configure, made twice to check this): it keeps something between calls outside the "
+            "state vector (a helper object it steps, a module-level variable") in str(err.value), err.value
+    assert h.status()["time"] == 0.0 and not h.status()["has_trial"]  # nothing committed, no trial to commit
+
+
+def test_a_helper_object_set_from_the_state_at_each_call_runs() -> None:
+    h = InProcessHandle(_ReloadedHelper(), "m")
+    h.configure({})
+    for i in range(40):  # past the runs whose attributes are compared
+        out = h.run_interval(np.linspace(0.4 * i, 0.4 * (i + 1), 3), {"power": np.ones((3, 1))}, commit=i > 0)
+    assert out.outputs["T"][-1, 0] < 20.0  # cooling towards power / 0.1 = 10
+
+
+def test_an_attribute_that_changes_late_in_the_run_is_found_at_a_later_look() -> None:
+    h = InProcessHandle(_LateLatch(), "m")
+    h.configure({})
+    with pytest.raises(SubsimError) as err:
+        for i in range(40):
+            h.run_interval(np.linspace(0.4 * i, 0.4 * (i + 1), 3), {"u": np.zeros((3, 1))}, commit=i > 0)
+    assert i == 15  # the 16th run looks again (the flag latched in the 11th, over [4, 4.4])
+    assert str(err.value).startswith("m.run_interval: [model_error] advance() changed the model's attribute(s) "
+                                     "['saturated'] (found over t in [6, 6.4], in one of the runs since the look at "
+                                     "t = 1.2): what evolves belongs in the state vector"), err.value

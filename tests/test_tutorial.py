@@ -74,6 +74,11 @@ def stop(proc: subprocess.Popen) -> None:
     proc.communicate()
 
 
+CHECK_PANEL = ("python -c \"import numpy as np; from cosim import check_pure; from panel_subsim import PanelSubsim; "
+               "t = np.linspace(0, 60, 4); check_pure(PanelSubsim(), {}, t, {'power': np.full((4, 1), 50.0)}); "
+               "print('pure')\"")
+
+
 def test_the_tutorial_runs_as_written(tmp_path: Path) -> None:
     work, bin_dir = tmp_path / "work", tmp_path / "bin"
     work.mkdir()
@@ -131,4 +136,4 @@ def test_the_tutorial_runs_as_written(tmp_path: Path) -> None:
             stop(proc)
     assert done == ["cosim describe twomass.toml", "cosim run twomass.toml",
                     "cosim plot results/twomass-distributed.csv", "terminal 2",
-                    "python -m pytest -q test_wall_mass.py"]
+                    "python -m pytest -q test_wall_mass.py", CHECK_PANEL]
