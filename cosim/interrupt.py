@@ -76,9 +76,19 @@ def handling(signals: tuple[int, ...] = SIGNALS) -> Iterator[None]:
         _State.active = False
 
 
+def _elsewhere() -> bool:
+    """Whether this is not the main thread: a run there installs no handlers (Python runs them in the main thread
+    only), so its blocks and its end must not touch the main thread's run (a run ending in a worker thread turned
+    Ctrl-C off for the main thread's: an API probe)."""
+    return threading.current_thread() is not threading.main_thread()
+
+
 @contextmanager
 def deferred() -> Iterator[None]:
     """A signal arriving inside the block is raised when it ends (not at all if the block raises)."""
+    if _elsewhere():
+        yield
+        return
     _State.depth += 1
     ok = False
     try:
@@ -95,6 +105,8 @@ def deferred() -> Iterator[None]:
 def finished() -> None:
     """The run is done: what is left (closing files, stopping subsims) finishes whatever comes. A signal held back
     until now, or arriving from now on, is only noted (:func:`late`): stopping would cut short a finished run."""
+    if _elsewhere():
+        return
     _State.finished = True
     if _State.pending is not None:
         _State.late, _State.pending = _State.pending, None

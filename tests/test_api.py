@@ -201,3 +201,37 @@ def test_api_mistakes_are_named(tmp_path: Path) -> None:
     with pytest.raises(KeyError, match=r"column 'mass1.u\[3\]': mass1.u has 1 columns, \[0\] to \[0\]"):
         r.column("mass1.u[3]")
     assert r.column("mass1.u[0]").tobytes() == r["mass1.u"][:, 0].tobytes()
+
+
+def test_a_bus_opened_in_a_fork_of_a_process_that_used_zenoh_is_refused_not_hung() -> None:
+    """A parameter sweep: cosim.run once in the script, then in multiprocessing workers (forked, Linux's default):
+    every worker hung for good (an API probe; Zenoh's threads do not survive a fork). It is refused, naming 'spawn'."""
+    import select
+    import signal
+
+    from cosim.protocol.transport.session import open_router
+
+    session, _ = open_router()  # this process uses Zenoh
+    session.close()
+    read, write = os.pipe()
+    child = os.fork()
+    if child == 0:  # pragma: no cover (the child)
+        try:
+            open_router()[0].close()
+            said = "opened"
+        except RuntimeError as exc:
+            said = str(exc)
+        os.write(write, said.encode())
+        os._exit(0)
+    os.close(write)
+    try:
+        ready, _, _ = select.select([read], [], [], 20.0)
+        said = os.read(read, 4096).decode() if ready else "hung"
+    finally:
+        os.close(read)
+        if not ready:
+            os.kill(child, signal.SIGKILL)
+        os.waitpid(child, 0)
+    assert said.startswith("this process was forked (multiprocessing's default start method on Linux) from one that "
+                           "had used Zenoh"), said
+    assert "multiprocessing.get_context('spawn')" in said

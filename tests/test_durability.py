@@ -176,6 +176,28 @@ def test_a_signal_during_the_cleanup_of_a_finished_run_cuts_nothing_short(tmp_pa
     assert read_results(out)[1][-1, 0] == 1.0 and not resume_path(out).exists()
 
 
+def test_a_run_ending_in_another_thread_leaves_the_main_threads_run_stoppable(tmp_path: Path) -> None:
+    """A script running cosim.run in a worker thread while its main thread runs another: the worker's run ended, and
+    Ctrl-C no longer stopped the main thread's (an API probe: the worker's end marked the main run finished)."""
+    import threading
+    import time
+
+    def worker() -> None:
+        run_scenario(load(OSCILLATOR), stop=0.2, output=tmp_path / "w.csv", inprocess=True, progress=False)
+        os.kill(os.getpid(), signal.SIGTERM)
+
+    thread = threading.Thread(target=worker)
+    with pytest.raises(interrupt.Interrupted) as stopped:
+        with interrupt.handling():
+            thread.start()
+            deadline = time.monotonic() + 30.0
+            while time.monotonic() < deadline:  # the main thread's run, its intervals written in deferred blocks
+                with interrupt.deferred():
+                    time.sleep(0.01)
+    thread.join()
+    assert stopped.value.name == "SIGTERM"
+
+
 def test_a_signal_with_the_last_interval_written_leaves_a_finished_run(tmp_path: Path, monkeypatch, capsys) -> None:
     """The signal held back while the last interval was written is raised at its end, with only the subsims' last
     commit left: the results are whole, so the run counts as finished (exit 0, no resume point to go on from)."""

@@ -166,6 +166,23 @@ def access_control(run: str, servers: Mapping[str, Sequence[str]]) -> dict[str, 
             "policies": policies}
 
 
+FORKED = ("this process was forked (multiprocessing's default start method on Linux) from one that had used Zenoh; "
+          "Zenoh's threads do not survive a fork, and a bus opened here would hang: start the worker processes with "
+          "multiprocessing.get_context('spawn'), or run them in-process (inprocess=True)")
+
+
+class _Fork:
+    used = False  # this process opened a Zenoh session
+    inherited = False  # this process is a fork of one that had
+
+
+def _forked() -> None:
+    _Fork.inherited = _Fork.used
+
+
+os.register_at_fork(after_in_child=_forked)
+
+
 def open_router(
     listen: str = "tcp/127.0.0.1:0",
     run: str | None = None,
@@ -212,6 +229,9 @@ def open_router(
             if run is not None:
                 extra["access_control"] = access_control(run, servers or {ANY_SUBSIM: list(logins)})
         tries = 5 if port == 0 else 1
+        if _Fork.inherited:
+            raise RuntimeError(FORKED)
+        _Fork.used = True
         for attempt in range(tries):
             chosen = _free_port(host) if port == 0 else port
             endpoint = f"{proto}/{host}:{chosen}" if port >= 0 else listen
