@@ -254,6 +254,7 @@ class Bus:
     # the Zenoh ids of the processes that have served each name in this run: a handle to its replacement ignores one
     # that wakes up and answers again (it holds none of the run's state now)
     _served: dict[str, set] = field(default_factory=dict, repr=False)
+    closed: bool = field(default=False, init=False)
 
     @classmethod
     def open(cls, listen: str = "tcp/127.0.0.1:0", run: str | None = None, security: Security | None = None,
@@ -355,6 +356,8 @@ class Bus:
     ) -> SubsimProcess:
         """Start ``python -m module`` (or ``cosim.serve model``) as subsim ``name``, here or ``elsewhere`` through
         its launcher; wait until it answers."""
+        if self.closed:  # (it started the process, then failed on the closed session: a zombie; an API probe)
+            raise RuntimeError(f"cannot start subsim {name!r}: this bus is closed (open another: Bus.open)")
         secrets = self.subsim_env(name)
         serving = [p.popen.pid for p in self.processes if p.name == name and p.popen.poll() is None]
         if serving:  # a second process would share its key: requests to either would reach the first
@@ -387,14 +390,19 @@ class Bus:
         except OSError as exc:  # e.g. out of file descriptors or processes, or no such launcher
             how = "its process" if elsewhere is None else f"its launcher {elsewhere.shown!r}"
             raise SubsimError("no_responder", f"cannot start {how}: {exc}", name, "spawn") from None
-        if popen.stdin is not None:
-            try:
-                popen.stdin.write(f"{secrets[SECRET_ENV]}\n{secrets[ZENOH_AUTH_ENV]}\n".encode())
-                popen.stdin.close()
-            except OSError:  # the launcher is gone already: its exit is reported below
-                pass
-        relay = StderrRelay(popen.stderr)
-        handle = self._remote_handle(name, timeout)
+        try:  # until it is in self.processes, nothing else would stop it (a Ctrl-C here left it running: an API probe)
+            if popen.stdin is not None:
+                try:
+                    popen.stdin.write(f"{secrets[SECRET_ENV]}\n{secrets[ZENOH_AUTH_ENV]}\n".encode())
+                    popen.stdin.close()
+                except OSError:  # the launcher is gone already: its exit is reported below
+                    pass
+            relay = StderrRelay(popen.stderr)
+            handle = self._remote_handle(name, timeout)
+        except BaseException:
+            popen.kill()
+            popen.wait()
+            raise
         handle.exit_status = partial(exit_status, popen, elsewhere, DEATH_REAPED, relay)
         if lease:
             handle.lease = lease
@@ -441,6 +449,9 @@ class Bus:
     def close(self) -> None:
         """Send ``shutdown`` to attached subsims, stop every spawned process, undeclare the coordinator's
         token, then close the session (the order matters: see zenoh-notes P1)."""
+        if self.closed:
+            return
+        self.closed = True
         pending = [self.session.get(rpc_key(self.run, name), timeout=3.0, consolidation=zenoh.ConsolidationMode.NONE,
                                     target=EVERY_QUERYABLE,
                                     payload=seal_request(self.key(name), next_seq(), encode_request("shutdown")))
@@ -462,8 +473,6 @@ class Bus:
         for thread in stopping:
             thread.join()
         self.processes.clear()
-        if failed:
-            raise failed[0]
         for step in (self._token.undeclare, self.session.close):
             try:  # the run is over: a router too busy to close in time (a connection flood) must not fail it
                 step()
@@ -471,6 +480,8 @@ class Bus:
                 pass
         if self.private_dir is not None:
             shutil.rmtree(self.private_dir, ignore_errors=True)
+        if failed:  # (after the session and the directory: a failed stop left both behind)
+            raise failed[0]
 
     def __enter__(self) -> Bus:
         return self

@@ -445,3 +445,36 @@ def test_a_subsim_process_on_an_old_eclipse_zenoh_exits_with_that_line_before_se
     assert done.returncode == 2
     assert done.stderr == "m: cosim needs eclipse-zenoh >= 1.10, < 2 and this Python has 1.0.4: pip install " \
                           "'eclipse-zenoh>=1.10,<2'\n", done.stderr
+
+
+def _children_named(name: str) -> list[int]:
+    """This process's child processes (running or not yet reaped) whose command line names ``name``."""
+    found = []
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            ppid = int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1])
+            cmdline = (entry / "cmdline").read_bytes().split(b"\0")
+        except (OSError, ValueError, IndexError):
+            continue
+        if ppid == os.getpid() and name.encode() in cmdline:
+            found.append(int(entry.name))
+    return found
+
+
+def test_a_ctrl_c_while_a_subsim_starts_leaves_no_process_behind(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A Ctrl-C between starting a subsim's process and the bus keeping it (an API probe: the process went on
+    running, then stayed a zombie); spawning on a closed bus started a process too, then failed."""
+    with Bus.open() as bus:
+        def interrupted(self: Bus, name: str, timeout: float) -> None:
+            raise KeyboardInterrupt
+
+        monkeypatch.setattr(Bus, "_remote_handle", interrupted)
+        with pytest.raises(KeyboardInterrupt):
+            bus.spawn("subsims.integrator", "window-probe", quiet=True)
+        assert _children_named("window-probe") == []
+        monkeypatch.undo()
+    with pytest.raises(RuntimeError, match="cannot start subsim 'closed-probe': this bus is closed"):
+        bus.spawn("subsims.integrator", "closed-probe", quiet=True)
+    assert _children_named("closed-probe") == []
