@@ -12,10 +12,12 @@ command line: the result file is written only when ``output`` is given. See docs
 
 from __future__ import annotations
 
+import copyreg
 import os
 import signal
 import tempfile
-from collections.abc import Callable, Mapping
+import types
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -33,9 +35,19 @@ from cosim.scenario import Scenario, ScenarioError, load, parse
 from cosim.unified import run_unified
 
 
-@dataclass
+# A Result holds its Scenario, whose tables are read-only views (MappingProxyType), which pickle cannot copy: a Result
+# could not come back from a multiprocessing worker (an API probe). They are pickled as the dicts they show.
+def _read_only(table: dict) -> types.MappingProxyType:
+    return types.MappingProxyType(table)
+
+
+copyreg.pickle(types.MappingProxyType, lambda view: (_read_only, (dict(view),)))
+
+
+@dataclass(repr=False)
 class Result:
-    """The time series of one run and its per-interval diagnostics."""
+    """The time series of one run and its per-interval diagnostics. ``r["subsim.port"]`` is a signal; ``in``,
+    ``len`` and iteration go over the signals' names."""
 
     scenario: Scenario
     method: str
@@ -53,12 +65,27 @@ class Result:
         except KeyError:
             raise KeyError(f"no signal {signal!r}; signals: {', '.join(self.signals)}") from None
 
+    def __contains__(self, signal: object) -> bool:
+        return signal in self.signals
+
+    def __iter__(self) -> Iterator[str]:  # (without it, `in` and a for loop asked for r[0], r[1], ...)
+        return iter(self.signals)
+
+    def __len__(self) -> int:
+        return len(self.signals)
+
+    def __repr__(self) -> str:  # (the dataclass's printed every array: 10,000 characters)
+        span = f"t = {self.t[0]:g} to {self.t[-1]:g} s, {self.t.size} samples" if self.t.size else "no samples"
+        signals = ", ".join(f"{k} {v.shape[1:] or ''}".rstrip() for k, v in self.signals.items())
+        return (f"<Result of {self.scenario.name!r}, {self.method}: {span}, {len(self.diagnostics.get('stages', ()))} "
+                f"intervals; signals {signals or 'none'}>")
+
     def column(self, name: str) -> np.ndarray:
         """One column as the result file names it: ``"time"`` or ``"subsim.port[i]"``."""
         if name == "time":
             return self.t
         signal_name, bracket, index = name.rpartition("[")
-        if not bracket or not index.endswith("]") or not index[:-1].isdigit():
+        if not bracket or not index.endswith("]") or not (index[:-1].isascii() and index[:-1].isdigit()):
             raise KeyError(f"column {name!r}: name one as 'subsim.port[i]' (or 'time'); r[{name!r}] is the whole "
                            "signal")
         signal, i = self[signal_name], int(index[:-1])

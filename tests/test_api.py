@@ -235,3 +235,22 @@ def test_a_bus_opened_in_a_fork_of_a_process_that_used_zenoh_is_refused_not_hung
     assert said.startswith("this process was forked (multiprocessing's default start method on Linux) from one that "
                            "had used Zenoh"), said
     assert "multiprocessing.get_context('spawn')" in said
+
+
+def test_a_result_is_iterable_over_its_signals_short_in_repr_and_picklable() -> None:
+    """What a notebook or a multiprocessing sweep does with a Result (an API probe): `in` and a for loop raised
+    "no signal 0", pickle could not copy its scenario's read-only tables (a Pool could not return one), and its repr
+    printed every array (10,014 characters)."""
+    import pickle
+
+    r = cosim.run(OSCILLATOR, stop=0.2, inprocess=True)
+    assert "mass1.u" in r and "mass1.x" not in r and 0 not in r
+    assert list(r) == ["mass1.u", "mass1.v", "mass2.u", "mass2.v"] and len(r) == 4
+    assert repr(r) == ("<Result of 'oscillator', distributed: t = 0 to 0.2 s, 17 samples, 4 intervals; signals mass1.u "
+                       "(1,), mass1.v (1,), mass2.u (1,), mass2.v (1,)>")
+    back = pickle.loads(pickle.dumps(r))
+    assert same_bits(back["mass2.u"], r["mass2.u"]) and back.scenario == r.scenario
+    with pytest.raises(TypeError):  # its tables are still read-only views
+        back.scenario.subsims["mass1"] = None  # type: ignore[index]
+    with pytest.raises(KeyError, match=r"name one as 'subsim.port\[i\]'"):  # (a ValueError from int('²'))
+        r.column("mass1.u[²]")
