@@ -358,11 +358,13 @@ class Tagged(np.ndarray):
     (lambda t: {"y": {"y": np.zeros((t.size, 1))}, "z": {}}, "has subsims ['y', 'z']"),
     (lambda t: {"y": {"v": np.zeros((t.size, 1))}}, "y has ['v'], its outputs are ['y']"),
     (lambda t: {"y": np.zeros((t.size, 1))}, "y has ndarray, its outputs are ['y']"),
-    (lambda t: {"y": {"y": 1.0}}, f"y.y must be a NumPy array of shape ({7}, 1), got float"),
-    (lambda t: {"y": {"y": np.zeros(t.size)}}, "y.y must be a NumPy array of shape (7, 1), got shape (7,)"),
-    (lambda t: {"y": {"y": np.zeros((t.size, 7))}}, "y.y must be a NumPy array of shape (7, 1), got shape (7, 7)"),
-    (lambda t: {"y": {"y": np.zeros((t.size, 1)).view(Tagged)}}, "y.y must be a NumPy array of shape (7, 1), got "
+    (lambda t: {"y": {"y": 1.0}}, f"y.y must be a real NumPy array of shape ({7}, 1), got float"),
+    (lambda t: {"y": {"y": np.zeros(t.size)}}, "y.y must be a real NumPy array of shape (7, 1), got shape (7,)"),
+    (lambda t: {"y": {"y": np.zeros((t.size, 7))}}, "y.y must be a real NumPy array of shape (7, 1), got shape (7, 7)"),
+    (lambda t: {"y": {"y": np.zeros((t.size, 1)).view(Tagged)}}, "y.y must be a real NumPy array of shape (7, 1), got "
      "Tagged (an ndarray subclass: send np.asarray of it)"),
+    (lambda t: {"y": {"y": np.zeros((t.size, 1), dtype=complex)}}, "y.y must be a real NumPy array of shape (7, 1), "
+     "got dtype complex128"),  # (it was taken, with a ComplexWarning: an API probe)
 ])
 @pytest.mark.parametrize("method", ["centralized", "distributed"])
 def test_a_drivers_wrong_answer_to_a_run_is_named(method: str, answer, words: str) -> None:
@@ -375,3 +377,11 @@ def test_a_drivers_wrong_answer_to_a_run_is_named(method: str, answer, words: st
     with pytest.raises(ValueError) as err:
         steps.send(answer(action.times))
     assert str(err.value).startswith("the answer sent to Run (subsims ['y'], 7 samples)") and words in str(err.value)
+
+
+@pytest.mark.parametrize(("start", "stop"), [(1.0, 0.0), (0.0, math.nan), (math.nan, 1.0), (0.0, math.inf)])
+def test_a_run_whose_stop_is_before_its_start_or_not_finite_is_refused(start: float, stop: float) -> None:
+    """It yielded Done at once, having run nothing (an API probe)."""
+    plan = Plan.build({"y": {"u": 1}}, {"y": {"y": 1}}, [Coupling.make("y.u", "y.y", "gain", {"k": -1.0})])
+    with pytest.raises(ValueError, match="both finite, the stop not before the start"):
+        Relaxation(plan, settings("centralized")).run(start, stop)

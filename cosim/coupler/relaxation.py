@@ -439,10 +439,12 @@ def _misanswered(got: Any, asked: Mapping[str, Any], n: int, outputs: Mapping[st
             return f"{head}: {name} has {found}, its outputs are {sorted(widths)}"
         for port, w in widths.items():
             v = ports[port]
-            if type(v) is not np.ndarray or v.shape != (n, w):
+            if type(v) is not np.ndarray or v.shape != (n, w) or v.dtype.kind not in "fiu":
                 what = f"shape {v.shape}" if type(v) is np.ndarray else type(v).__name__ + (
                     " (an ndarray subclass: send np.asarray of it)" if isinstance(v, np.ndarray) else "")
-                return f"{head}: {name}.{port} must be a NumPy array of shape ({n}, {w}), got {what}"
+                if type(v) is np.ndarray and v.shape == (n, w):  # (complex was taken, with a ComplexWarning)
+                    what = f"dtype {v.dtype}"
+                return f"{head}: {name}.{port} must be a real NumPy array of shape ({n}, {w}), got {what}"
     return head  # (not reached)
 
 
@@ -482,6 +484,8 @@ class Relaxation:
         """Whole intervals from ``t_start`` (every subsim's committed time) past ``t_stop``; returns the summary.
         ``resume``: go on with the run that started at ``t_start`` from that point instead (every subsim's
         committed time is ``resume.t``), as it would have gone on."""
+        if not (math.isfinite(t_start) and math.isfinite(t_stop)) or t_stop < t_start:  # (it ran nothing, no word)
+            raise ValueError(f"run from t = {t_start!r} to t = {t_stop!r}: both finite, the stop not before the start")
         if resume is not None:
             self._previous, self._magnitudes = dict(resume.previous), dict(resume.magnitudes)
         return self._run(t_start, t_stop, resume)
@@ -681,7 +685,7 @@ class Relaxation:
         mistake is named here (a KeyError or an IndexError deep in a coupling or the check said nothing)."""
         try:
             if got.keys() == asked.keys() and all(
-                    type(v) is np.ndarray and v.shape == (n, w)
+                    type(v) is np.ndarray and v.shape == (n, w) and v.dtype.kind in "fiu"
                     for name in asked for v, w in _zip_ports(got[name], self.plan.outputs[name])):
                 return got
         except (AttributeError, KeyError, TypeError):
