@@ -6,6 +6,7 @@ A run (or a subsim serving it) must not die of that, so from then on nothing mor
 
 from __future__ import annotations
 
+import codecs
 import io
 import math
 import os
@@ -13,14 +14,23 @@ import select
 import sys
 import threading
 import time
+from collections.abc import Callable
+
+
+class _Gone:
+    stream: object = None  # the stderr whose reader went away: nothing more is written to it
 
 
 def say(line: str) -> None:
-    """``line`` on stderr, flushed; once stderr is gone, nothing."""
+    """``line`` on stderr, flushed; once that stderr is gone, nothing (a stream put in its place is written to: a
+    library must not replace the caller's sys.stderr, as this did)."""
+    stream = sys.stderr
+    if stream is None or stream is _Gone.stream:
+        return
     try:
-        print(line, file=sys.stderr, flush=True)
+        print(line, file=stream, flush=True)
     except OSError:
-        sys.stderr = open(os.devnull, "w")  # for the rest of the process
+        _Gone.stream = stream
 
 
 class _PrefixedRaw(io.RawIOBase):
@@ -83,7 +93,8 @@ class StderrRelay:
             self._thread.start()
 
     def _copy(self) -> None:
-        fd, out = self._pipe.fileno(), _stderr_fd()
+        fd = self._pipe.fileno()
+        write: Callable[[bytes], None] | None = _stderr_writer()
         poller = select.poll()
         poller.register(fd, select.POLLIN)
         while not self._abandoned:
@@ -96,11 +107,11 @@ class StderrRelay:
             if not data:
                 break
             self._tail, self._written = (self._tail + data)[-self.KEPT:], time.monotonic()
-            while data and out >= 0:
+            if write is not None:
                 try:
-                    data = data[os.write(out, data):]
-                except OSError:  # our stderr is gone: keep draining the child's (it must never block on it)
-                    out = -1
+                    write(data)
+                except (OSError, ValueError):  # our stderr is gone: keep draining the child's (it must never block)
+                    write = None
         self._pipe.close()
 
     def finish(self, timeout: float = 1.0) -> None:
@@ -120,6 +131,25 @@ class StderrRelay:
         if not lines:
             return None
         return lines[-1] if len(lines[-1]) <= self.LINE else f"{lines[-1][:self.LINE]} [...]"
+
+
+def _stderr_writer() -> Callable[[bytes], None]:
+    """Where a child's stderr is copied, looked up at each write: ``sys.stderr`` when something was put in its place
+    (a notebook's stream, a test's capture), decoded as UTF-8 (a notebook showed none of it: an API probe); else this
+    process's stderr descriptor, if it has one. Raises OSError or ValueError once that is gone."""
+    decode = codecs.getincrementaldecoder("utf-8")("backslashreplace").decode  # (a character split across reads)
+
+    def write(data: bytes) -> None:
+        stream = sys.stderr
+        if stream is not None and stream is not sys.__stderr__:
+            stream.write(decode(data))
+            stream.flush()
+            return
+        out = _stderr_fd()
+        while data and out >= 0:
+            data = data[os.write(out, data):]
+
+    return write
 
 
 def _stderr_fd() -> int:

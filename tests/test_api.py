@@ -254,3 +254,31 @@ def test_a_result_is_iterable_over_its_signals_short_in_repr_and_picklable() -> 
         back.scenario.subsims["mass1"] = None  # type: ignore[index]
     with pytest.raises(KeyError, match=r"name one as 'subsim.port\[i\]'"):  # (a ValueError from int('²'))
         r.column("mass1.u[²]")
+
+
+def test_what_subsims_print_reaches_a_replaced_sys_stderr_and_a_broken_one_is_not_replaced(monkeypatch) -> None:
+    """In a notebook sys.stderr is the notebook's stream: what the subsims wrote went to the kernel's terminal
+    instead (copied to descriptor 2), and one OSError writing a line replaced the caller's sys.stderr with
+    /dev/null for the rest of the process (an API probe)."""
+    import contextlib
+    import io
+
+    from cosim.console import say
+
+    shown = io.StringIO()
+    with contextlib.redirect_stderr(shown):
+        cosim.run(OSCILLATOR, stop=0.1, progress=True)
+    assert re.search(r"^mass1: serving run run-\w+ via \S+ as Zenoh id \w+ \(pid \d+\)$", shown.getvalue(), re.M), \
+        shown.getvalue()
+
+    class Broken(io.StringIO):
+        def write(self, text: str) -> int:
+            raise BrokenPipeError(32, "Broken pipe")
+
+    broken = Broken()
+    monkeypatch.setattr(sys, "stderr", broken)
+    say("one line")  # the reader is gone: nothing, no error
+    assert sys.stderr is broken
+    monkeypatch.setattr(sys, "stderr", shown)
+    say("after it")
+    assert shown.getvalue().endswith("after it\n")

@@ -63,6 +63,7 @@ def test_without_a_stderr_of_its_own_it_writes_nowhere(capfd, monkeypatch: pytes
     """A coordinator started with stderr closed (2>&-) has descriptor 2 reused by its own files (the run's lock):
     its subsims' lines went into that file (red team)."""
     monkeypatch.setattr(console.sys, "__stderr__", None)
+    monkeypatch.setattr(console.sys, "stderr", None)  # (as Python starts without descriptor 2: both None)
     read, write = os.pipe()
     relay = StderrRelay(os.fdopen(read, "rb"))
     os.write(write, b"into the lock file?\n")
