@@ -36,6 +36,18 @@ def test_an_identity_coupling_joins_ports_of_one_unit(source: str, target: str, 
                               "the coupling joins the wrong ports")
 
 
+@pytest.mark.parametrize(("source_unit", "target_unit"), [("K", "degC"), ("\u00b0F", "K")])
+def test_temperatures_in_two_scales_are_told_to_convert_with_an_offset(source_unit: str, target_unit: str) -> None:
+    """K to degC was told to convert with a gain, which cannot (a legacy-code probe)."""
+    with pytest.raises(CouplingError) as err:
+        check_units([Coupling.make("ctl.T", "panel.T")], {"ctl": {"T": target_unit}}, {"panel": {"T": source_unit}})
+    assert ("convert with a transform (transform = \"linear\", params = { gains = [1.0], offset = ... }: a scale with "
+            "an offset, K = degC + 273.15)") in str(err.value), err.value
+    with pytest.raises(CouplingError) as err:  # coulomb and farad are no temperatures: a gain, as before
+        check_units([Coupling.make("ctl.T", "panel.T")], {"ctl": {"T": "F"}}, {"panel": {"T": "C"}})
+    assert "(transform = \"gain\", params = { k = ... })" in str(err.value)
+
+
 def test_every_coupling_between_other_units_is_named_at_once() -> None:
     couplings = [Coupling.make("wheel.omega", "att.omega"), Coupling.make("wheel.phi", "att.phi"),
                  Coupling.make("wheel.free", "att.raw"), Coupling.make("wheel.phi", "att.omega")]
