@@ -183,6 +183,12 @@ class Coordinator:
         on_checkpoint: OnCheckpoint | None = None,
         checkpoint_every: int = 200,
     ) -> None:
+        if not isinstance(settings, Settings):  # (a dict failed later: "'dict' object has no attribute 'method'")
+            raise TypeError(f"settings must be a cosim.coupler.relaxation.Settings (Settings(**table) of a dict), got "
+                            f"{type(settings).__name__}")
+        if not isinstance(couplings, Plan) and not all(isinstance(c, Coupling) for c in couplings):
+            raise TypeError("couplings must be a Plan or a list of Coupling (Coupling.make(to, from, transform, "
+                            "params)), got " + ", ".join(sorted({type(c).__name__ for c in couplings})))
         self.handles = dict(handles)
         # a checkpoint every so many intervals: for replacements (recovery's setting), and handed to on_checkpoint
         self.on_checkpoint = on_checkpoint

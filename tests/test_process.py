@@ -478,3 +478,23 @@ def test_a_ctrl_c_while_a_subsim_starts_leaves_no_process_behind(monkeypatch: py
     with pytest.raises(RuntimeError, match="cannot start subsim 'closed-probe': this bus is closed"):
         bus.spawn("subsims.integrator", "closed-probe", quiet=True)
     assert _children_named("closed-probe") == []
+
+
+def test_a_handle_used_after_its_bus_closed_says_so_and_a_coordinator_checks_its_arguments() -> None:
+    """A library user's mistakes (an API probe): the closed bus was reported as 'the subsim process is gone: its
+    process exited with code 0', and settings given as a dict failed inside with "'dict' object has no attribute
+    'method'"."""
+    from cosim.coupler.relaxation import Settings
+    from cosim.driver import Coordinator
+
+    with Bus.open() as bus:
+        handle = bus.spawn("subsims.integrator", "after-close", quiet=True).handle
+    with pytest.raises(SubsimError) as err:
+        handle.status()
+    assert str(err.value) == ("after-close.status: [no_responder] its bus is closed (the coordinator's session, and "
+                              "the processes it started): open another and spawn or attach the subsim again")
+    with pytest.raises(TypeError, match=r"settings must be a cosim.coupler.relaxation.Settings \(Settings\(\*\*table\) "
+                                        r"of a dict\), got dict"):
+        Coordinator({"a": handle}, [], {"interval": 0.05})  # type: ignore[arg-type]
+    with pytest.raises(TypeError, match="couplings must be a Plan or a list of Coupling .*, got str"):
+        Coordinator({"a": handle}, ["a.u <- a.y"], Settings())  # type: ignore[list-item]

@@ -275,6 +275,9 @@ class RemoteHandle(SubsimHandle):
 
     def _begin(self, cmd: str, args: dict[str, Any]) -> Callable[[], dict]:
         if self._died.is_set() and not self._still_served():
+            if self.session.is_closed():  # (it said the process had exited with code 0: the bus stopped it)
+                raise SubsimError("no_responder", "its bus is closed (the coordinator's session, and the processes "
+                                  "it started): open another and spawn or attach the subsim again", self.name, cmd)
             raise self._died_error(GONE, cmd, self._token_went(during=False))
         seq, payload = self._seal(encode_request(cmd, args))
         token = zenoh.CancellationToken()
