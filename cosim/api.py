@@ -95,6 +95,9 @@ class Result:
         return signal[:, i]
 
 
+DIAG_KINDS = (int, float, float, int, float, float, int, int, float, float)  # of DIAG_COLUMNS: counts are integers
+
+
 class _Collect:
     """Gathers the committed intervals as the result writer does: each interval but its last sample."""
 
@@ -122,8 +125,7 @@ class _Collect:
         signals = {k: np.concatenate([*v, last.outputs[k.split(".", 1)[0]][k.split(".", 1)[1]][-1:]])
                    for k, v in self.signals.items()}
         columns = list(zip(*self.diag))
-        kinds = [int, float, float, int, float, float, int, int, float, float]
-        diag = {c: np.array(col, dtype=kind) for c, col, kind in zip(DIAG_COLUMNS, columns, kinds, strict=True)}
+        diag = {c: np.array(col, dtype=kind) for c, col, kind in zip(DIAG_COLUMNS, columns, DIAG_KINDS, strict=True)}
         return t, signals, diag
 
 
@@ -222,6 +224,6 @@ def _from_file(sc: Scenario, report: Any, output: str | Path | None) -> Result:
     for i, name in enumerate(columns[1:], start=1):
         signals.setdefault(name.rpartition("[")[0], []).append(data[:, i])
     _, diag_rows = read_results(report.diagnostics)
-    diag = {c: diag_rows[:, j] for j, c in enumerate(DIAG_COLUMNS)}
+    diag = {c: diag_rows[:, j].astype(kind) for j, (c, kind) in enumerate(zip(DIAG_COLUMNS, DIAG_KINDS, strict=True))}
     return Result(sc, report.method, data[:, 0], {k: np.column_stack(v) for k, v in signals.items()}, diag,
                   report.summary, report.order, report.feedback, Path(output) if output is not None else None)

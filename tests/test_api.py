@@ -61,6 +61,9 @@ def test_unified_method_and_the_written_file(tmp_path: Path) -> None:
     assert r.output == out and out.read_bytes() == (tmp_path / "cli.csv").read_bytes()
     for i, name in enumerate(columns):
         assert same_bits(r.column(name), data[:, i]), name
+    coupled = cosim.run(OSCILLATOR, stop=0.1, inprocess=True)  # (read back from the file, counts were floats)
+    assert {k: v.dtype for k, v in r.diagnostics.items()} == {k: v.dtype for k, v in coupled.diagnostics.items()}
+    assert r.diagnostics["stages"].dtype == np.int64
 
 
 def test_params_override_the_scenario_for_one_run(tmp_path: Path) -> None:
