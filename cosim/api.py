@@ -27,6 +27,7 @@ import numpy as np
 from cosim import interrupt
 from cosim.console import say
 from cosim.coupler.relaxation import Interval, RunSummary
+from cosim.outputs import OutputError
 from cosim.preflight import UsageError, check_run_arguments
 from cosim.protocol.keys import check_name
 from cosim.results import DIAG_COLUMNS, read_results
@@ -192,16 +193,36 @@ def run(
         if on_interval is not None:
             on_interval(interval)
 
-    with interrupt.handling((signal.SIGINT,)):  # the script keeps its own SIGTERM and SIGHUP
-        report = run_scenario(sc, method=method, stop=stop, output=None if output is None else Path(output),
-                              inprocess=inprocess, listen=listen, progress=progress, log=log, on_interval=each,
-                              run_id=run_id, attach_wait=attach_wait, restarts=restarts, timeout=timeout,
-                              resume=resume, record=output is not None)
+    try:
+        with interrupt.handling((signal.SIGINT,)):  # the script keeps its own SIGTERM and SIGHUP
+            report = run_scenario(sc, method=method, stop=stop, output=None if output is None else Path(output),
+                                  inprocess=inprocess, listen=listen, progress=progress, log=log, on_interval=each,
+                                  run_id=run_id, attach_wait=attach_wait, restarts=restarts, timeout=timeout,
+                                  resume=resume, record=output is not None)
+    except (ScenarioError, OutputError) as exc:  # the command's words, for its options: this caller's arguments
+        if len(exc.args) == 1 and isinstance(exc.args[0], str):
+            exc.args = (in_api_words(exc.args[0]),)
+        raise
     if resume:  # the intervals before the resume point are in the file only
         return _from_file(sc, report, output)
     t, signals, diag = collect.arrays()
     return Result(sc, report.method, t, signals, diag, report.summary, report.order, report.feedback,
                   Path(output) if output is not None else None)
+
+
+# what the command's messages say of its options, as cosim.run's arguments (a script was told to pass --overwrite)
+API_WORDS = (("(--overwrite instead of --resume)", "(resume=False)"), ("with --overwrite", "with resume=False"),
+             ("(--overwrite;", "(resume=False;"), ("pass --overwrite to replace it, or choose another --output",
+                                                   "choose another output="),
+             ("--resume", "resume=True"), ("--overwrite", "resume=False"), ("--output", "output="),
+             ("--timeout", "timeout="), ("--attach-wait", "attach_wait="), ("--listen", "listen="),
+             ("--stop", "stop="), ("--inprocess", "inprocess=True"), ("--method", "method="))
+
+
+def in_api_words(text: str) -> str:
+    for command, argument in API_WORDS:
+        text = text.replace(command, argument)
+    return text
 
 
 def _with_params(sc: Scenario, params: Mapping[str, Mapping[str, Any]]) -> Scenario:

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 import cosim
+from cosim.outputs import OutputError
 from cosim.results import DIAG_COLUMNS, read_results
 from cosim.scenario import ScenarioError
 
@@ -285,3 +286,13 @@ def test_what_subsims_print_reaches_a_replaced_sys_stderr_and_a_broken_one_is_no
     monkeypatch.setattr(sys, "stderr", shown)
     say("after it")
     assert shown.getvalue().endswith("after it\n")
+
+
+def test_errors_name_the_functions_arguments_not_the_commands_options(tmp_path: Path) -> None:
+    """A script was told to pass --overwrite and --resume (an API probe)."""
+    out = tmp_path / "r.csv"
+    cosim.run(OSCILLATOR, stop=0.1, inprocess=True, output=out)  # finished: no resume point left
+    with pytest.raises(OutputError) as err:
+        cosim.run(OSCILLATOR, stop=0.2, inprocess=True, output=out, resume=True)
+    said = str(err.value)
+    assert said.endswith("run it again from the start (resume=False)") and "--" not in said, said
