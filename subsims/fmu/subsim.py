@@ -120,12 +120,14 @@ class FmuSubsim(Subsim):
     another machine gets the coordinator's path); ``FmuSubsim()`` takes the path from ``params["fmu"]``."""
 
     name = "fmu"
+    caches = ("_step",)  # the communication step of an FMU that cannot change it: the first one it took
 
     def __init__(self, fmu: str | Path | None = None) -> None:
         self.fmu_path = None if fmu is None else Path(fmu)
         self.info: FmuInfo | None = None
         self.kind = "cs"
         self._holder: list[Instance | None] = [None]
+        self._step: list[float] = []
         if self.fmu_path is not None:
             self.info = read_fmu(self.fmu_path)
             self.kind = "cs" if "cs" in self.info.identifiers else "me"
@@ -311,6 +313,8 @@ class FmuSubsim(Subsim):
             data = decode_state(state)
         except ValueError as exc:
             raise ModelError(str(exc)) from None
+        if self.kind == "cs" and self.info is not None and self.info.fixed_step and times.size > 1:
+            self._same_step(float(times[1] - times[0]) / self.substeps)
         try:
             inst.restore(data)
             if self.kind == "cs":
@@ -322,6 +326,18 @@ class FmuSubsim(Subsim):
             raise (IntervalTooLong if exc.discard else ModelError)(str(exc)) from None
         names = [v.name for v in self.info.outputs]
         return {n: outputs[:, i : i + 1] for i, n in enumerate(names)}, encode_state(end, self.capacity)
+
+    def _same_step(self, step: float) -> None:
+        """Refuse another communication step than the first for an FMU that cannot change it (an FMI probe: an
+        automatic interval, or a halving, stepped it anyway: an FMU with a fixed-step solver fails, or ignores it)."""
+        if not self._step:
+            self._step.append(step)
+        elif abs(step - self._step[0]) > 1e-9 * self._step[0]:
+            assert self.info is not None
+            raise ModelError(f"{self.info.path.name} cannot change its communication step "
+                             "(canHandleVariableCommunicationStepSize is false): it stepped "
+                             f"{self._step[0]:.9g} s, this interval asks {step:.9g} s; give it a fixed [coupling] "
+                             "interval (not \"auto\") and max_halvings = 0")
 
     def _input_matrix(self, u: InputFunction, points: np.ndarray) -> np.ndarray:
         """Inputs at ``points`` (k,), one column per FMU input: one call of ``u`` on the array of times where

@@ -211,6 +211,34 @@ def test_a_coupling_naming_a_variable_that_is_no_port_says_why(fmus: dict[str, P
     assert str(err.value) == "coupling box.nothing -> other.F: 'box' has no output 'nothing' (outputs: u, v)"
 
 
+def test_an_fmu_that_cannot_change_its_communication_step_is_not_stepped_another(fmus: dict[str, Path],
+                                                                                   tmp_path: Path) -> None:
+    """canHandleVariableCommunicationStepSize="false" and interval = "auto" (or a halving): it was stepped at
+    every length anyway (an FMI probe's open item; an FMU with a fixed-step solver fails, or ignores the step)."""
+    import zipfile
+
+    fixed = tmp_path / "mass2_fixed.fmu"
+    with zipfile.ZipFile(fmus["mass2"]) as src, zipfile.ZipFile(fixed, "w") as dst:
+        for item in src.infolist():
+            data = src.read(item)
+            if item.filename == "modelDescription.xml":
+                data = data.replace(b'canHandleVariableCommunicationStepSize="true"',
+                                    b'canHandleVariableCommunicationStepSize="false"')
+            dst.writestr(item, data)
+    assert read_fmu(fixed).fixed_step
+    rt = Runtime(FmuSubsim, name="fixed")
+    rt.configure({"fmu": str(fixed), "u0": 0.5})
+    rt.run_interval(T, {"F": np.zeros((5, 1))})
+    rt.run_interval(T + 0.4, {"F": np.zeros((5, 1))}, commit=True)  # the same step: runs
+    with pytest.raises(CosimError) as err:
+        rt.run_interval(np.linspace(0.8, 1.0, 5), {"F": np.zeros((5, 1))}, commit=True)
+    assert err.value.code == "model_error"
+    assert err.value.message == ("at t in [0.8, 1.0]: mass2_fixed.fmu cannot change its communication step "
+                                 "(canHandleVariableCommunicationStepSize is false): it stepped 0.1 s, this interval "
+                                 "asks 0.05 s; give it a fixed [coupling] interval (not \"auto\") and max_halvings = 0")
+    assert rt.time == 0.4  # nothing of the refused interval committed (its commit rode on it)
+
+
 def test_an_alias_and_its_variable_given_together_are_refused(fmus: dict[str, Path]) -> None:
     rt = Runtime(FmuSubsim)
     rt.configure({"fmu": str(fmus["mass2_alias"]), "x0": 0.25})  # the alias alone sets u0
