@@ -13,12 +13,14 @@ command line: the result file is written only when ``output`` is given. See docs
 from __future__ import annotations
 
 import copyreg
+import io
 import os
+import pickle
 import signal
 import tempfile
 import types
 from collections.abc import Callable, Iterator, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
@@ -36,13 +38,12 @@ from cosim.scenario import Scenario, ScenarioError, load, parse
 from cosim.unified import run_unified
 
 
-# A Result holds its Scenario, whose tables are read-only views (MappingProxyType), which pickle cannot copy: a Result
-# could not come back from a multiprocessing worker (an API probe). They are pickled as the dicts they show.
 def _read_only(table: dict) -> types.MappingProxyType:
     return types.MappingProxyType(table)
 
 
-copyreg.pickle(types.MappingProxyType, lambda view: (_read_only, (dict(view),)))
+def _result(pickled: bytes) -> Result:
+    return Result(**pickle.loads(pickled))
 
 
 @dataclass(repr=False)
@@ -74,6 +75,17 @@ class Result:
 
     def __len__(self) -> int:
         return len(self.signals)
+
+    def __reduce__(self) -> tuple[Any, tuple[bytes]]:
+        """Its scenario's tables are read-only views (MappingProxyType), which pickle cannot copy: a Result could not
+        come back from a multiprocessing worker (an API probe). They are pickled as the dicts they show, by a pickler
+        of its own (copyreg's table, for every pickle in the process, is left as it is)."""
+        buffer = io.BytesIO()
+        pickler = pickle.Pickler(buffer, pickle.HIGHEST_PROTOCOL)
+        pickler.dispatch_table = {**copyreg.dispatch_table,
+                                  types.MappingProxyType: lambda view: (_read_only, (dict(view),))}
+        pickler.dump({f.name: getattr(self, f.name) for f in fields(self)})
+        return _result, (buffer.getvalue(),)
 
     def __repr__(self) -> str:  # (the dataclass's printed every array: 10,000 characters)
         span = f"t = {self.t[0]:g} to {self.t[-1]:g} s, {self.t.size} samples" if self.t.size else "no samples"

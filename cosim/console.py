@@ -110,7 +110,7 @@ class StderrRelay:
             if write is not None:
                 try:
                     write(data)
-                except (OSError, ValueError):  # our stderr is gone: keep draining the child's (it must never block)
+                except OSError:  # our stderr is gone: keep draining the child's (it must never block on it)
                     write = None
         self._pipe.close()
 
@@ -142,8 +142,12 @@ def _stderr_writer() -> Callable[[bytes], None]:
     def write(data: bytes) -> None:
         stream = sys.stderr
         if stream is not None and stream is not sys.__stderr__:
-            stream.write(decode(data))
-            stream.flush()
+            text = decode(data)
+            try:
+                stream.write(text)
+                stream.flush()
+            except (UnicodeError, ValueError, TypeError):  # this chunk (a stream that cannot encode it): not the rest
+                pass
             return
         out = _stderr_fd()
         while data and out >= 0:

@@ -113,10 +113,10 @@ def finished() -> None:
 
 
 def late() -> str | None:
-    """The name of the first signal that came after :func:`finished`, if any."""
-    return None if _State.late is None else signal.Signals(_State.late).name
+    """The name of the first signal that came after :func:`finished`, if any (in the main thread's run)."""
+    return None if _State.late is None or _elsewhere() else signal.Signals(_State.late).name
 
 
 def pending() -> int | None:
     """A signal that arrived inside :func:`deferred` and was not raised (the block raised instead)."""
-    return _State.pending
+    return None if _elsewhere() else _State.pending

@@ -451,7 +451,6 @@ class Bus:
         token, then close the session (the order matters: see zenoh-notes P1)."""
         if self.closed:
             return
-        self.closed = True
         pending = [self.session.get(rpc_key(self.run, name), timeout=3.0, consolidation=zenoh.ConsolidationMode.NONE,
                                     target=EVERY_QUERYABLE,
                                     payload=seal_request(self.key(name), next_seq(), encode_request("shutdown")))
@@ -478,6 +477,7 @@ class Bus:
                 step()
             except zenoh.ZError:
                 pass
+        self.closed = True  # (only now: a close cut short, by a Ctrl-C say, may be done again)
         if self.private_dir is not None:
             shutil.rmtree(self.private_dir, ignore_errors=True)
         if failed:  # (after the session and the directory: a failed stop left both behind)

@@ -11,6 +11,7 @@ import hashlib
 import math
 import os
 import re
+import time
 import traceback
 from collections import deque
 from collections.abc import Callable, Mapping
@@ -51,22 +52,26 @@ def _model_exception(where: str, exc: BaseException) -> CosimError:
 
 
 ATTRIBUTES_WATCHED = 3  # run_intervals after a configure whose model attributes are compared with the configured ones
-WATCH_EVERY = 16  # and after those, every this many (a mode flag on self that latches late; a few us a run)
+WATCH_EVERY = 16  # and after those, every this many (a mode flag on self that latches late)...
+WATCH_SHARE = 0.01  # ...made rarer (the period doubled) while a look costs more than this share of the runs between
+RERUN_LIMIT = 1.0  # s: a first run after configure quicker than this is made twice (a slower one: its deadline)
+MARKED_WHOLE = 1 << 16  # bytes: a larger array attribute is marked by a digest (the marks are kept for the whole run)
 
 
 VALUES = (bool, int, float, complex, str, bytes, tuple, frozenset, type(None))  # compared by value
 
 
-def _attribute_marks(model: object) -> dict[str, Any]:
+def _attribute_marks(model: object, whole: int = 0) -> dict[str, Any]:
     """What tells a model's attribute changed (:func:`_mark` of each, but for the caches it declares);
-    :func:`_changed_attributes` compares two."""
+    :func:`_changed_attributes` compares two. ``whole``: bytes up to which an array is kept as its bytes (above: a
+    digest of them; 0: DIGESTED)."""
     caches = set(getattr(model, "caches", ()))
-    return {k: _marked(v) for k, v in vars(model).items() if k not in caches}
+    return {k: _marked(v, whole) for k, v in vars(model).items() if k not in caches}
 
 
-def _marked(v: Any) -> Any:
+def _marked(v: Any, whole: int = 0) -> Any:
     try:
-        return _mark(v, _Budget(), ())
+        return _mark(v, _Budget(whole), ())
     except Exception:  # an object that cannot be looked into (a released memoryview, a __len__ raising): itself
         return _Ref(v)
 
@@ -74,10 +79,11 @@ def _marked(v: Any) -> Any:
 class _Budget:
     """How much of one attribute is looked into: past it, a container is marked as itself (what it holds unseen)."""
 
-    __slots__ = ("items", "nbytes")
+    __slots__ = ("items", "nbytes", "whole")
 
-    def __init__(self) -> None:
+    def __init__(self, whole: int = 0) -> None:
         self.items, self.nbytes = 20_000, 1 << 30
+        self.whole = whole or DIGESTED  # bytes of an array kept as they are; above, a digest
 
     def take(self, items: int = 0, nbytes: int = 0) -> bool:
         if items > self.items or nbytes > self.nbytes:
@@ -112,11 +118,12 @@ def _mark(v: Any, budget: _Budget, within: tuple[int, ...]) -> Any:
     if isinstance(v, np.ndarray):
         if not budget.take(nbytes=v.nbytes) and within:
             return _Ref(v)
-        return ("array", v.dtype.str, v.shape, _contents(v))
+        return ("array", v.dtype.str, v.shape, _contents(v, budget.whole))
     if isinstance(v, (float, np.floating)):
         return _NAN if v != v else v
     if isinstance(v, (bytearray, memoryview)):
-        return ("bytes", _contents(np.frombuffer(v, np.uint8))) if budget.take(nbytes=len(v)) else _Ref(v)
+        return ("bytes", _contents(np.frombuffer(v, np.uint8), budget.whole)) if budget.take(nbytes=len(v)) \
+            else _Ref(v)
     if isinstance(v, VALUES + (np.generic,)) and not isinstance(v, (tuple, frozenset)):
         return v
     if id(v) in within or len(within) >= DEPTH:
@@ -134,9 +141,9 @@ def _mark(v: Any, budget: _Budget, within: tuple[int, ...]) -> Any:
 DIGESTED = 64 << 20  # bytes: a larger array is compared by a BLAKE2 digest of its bytes, not a copy of them
 
 
-def _contents(a: np.ndarray) -> bytes:
-    """What an array holds, as bytes to compare: a copy of them, or above DIGESTED a digest (no copy)."""
-    if a.nbytes <= DIGESTED or a.dtype.hasobject:
+def _contents(a: np.ndarray, whole: int = DIGESTED) -> bytes:
+    """What an array holds, as bytes to compare: a copy of them, or above ``whole`` bytes a digest (no copy)."""
+    if a.nbytes <= whole or a.dtype.hasobject:
         return a.tobytes()
     flat = np.ascontiguousarray(a).reshape(-1).view(np.uint8)  # (any dtype: datetime64 is no buffer of its own)
     return hashlib.blake2b(flat.data, digest_size=16).digest()
@@ -157,12 +164,12 @@ def _same(a: Any, b: Any) -> bool:
         return False
 
 
-def _same_bits(again: Any, outputs: Mapping[str, np.ndarray], end_state: np.ndarray) -> bool:
-    """Whether ``again``, what advance() returned a second time, holds the bits of the checked first answer."""
+def _same_outputs(again: Any, outputs: Mapping[str, np.ndarray]) -> bool:
+    """Whether ``again``, what advance() returned a second time, holds the outputs of the checked first answer."""
     try:
-        out, end = again
-        return out.keys() == outputs.keys() and np.asarray(end, dtype=np.float64).tobytes() == end_state.tobytes() \
-            and all(np.asarray(out[k], dtype=np.float64).tobytes() == v.tobytes() for k, v in outputs.items())
+        out, _ = again
+        return out.keys() == outputs.keys() and \
+            all(np.asarray(out[k], dtype=np.float64).tobytes() == v.tobytes() for k, v in outputs.items())
     except (TypeError, ValueError, AttributeError):  # not even of the first answer's form
         return False
 
@@ -271,6 +278,9 @@ class Runtime:
         self.shutdown_requested = False
         self._configured_marks: dict[str, Any] | None = None  # the model's attributes as configure left them
         self._runs = 0  # run_intervals since the configure
+        self._watch_every = WATCH_EVERY  # runs between looks at them, after the first ATTRIBUTES_WATCHED
+        self._next_look = 0  # the run after which they are looked at next (beyond the first ones)
+        self._looked = 0.0  # when the latest look ended (perf_counter)
         self._watched_until: float | None = None  # the end of the latest run whose attributes were compared
         self._rerun_checked = True  # whether a run since the configure was repeated and gave the same bits
         # told of every error the model caused (model_error, model_exception), e.g. to show it to the model's
@@ -362,8 +372,9 @@ class Runtime:
         self.model, self.inputs, self.outputs = model, inputs, outputs
         self._set_committed(t0, state)
         self.history.clear()
-        self._configured_marks = _attribute_marks(model) if hasattr(model, "__dict__") else None
+        self._configured_marks = _attribute_marks(model, MARKED_WHOLE) if hasattr(model, "__dict__") else None
         self._runs, self._watched_until, self._rerun_checked = 0, None, False
+        self._watch_every, self._next_look, self._looked = WATCH_EVERY, WATCH_EVERY, time.perf_counter()
         return self.describe()
 
     def run_interval(self, t: Any, inputs: Mapping[str, Any], interp: str = "linear", commit: bool = False) -> dict:
@@ -391,9 +402,11 @@ class Runtime:
         except ValueError as exc:
             raise CosimError("bad_value", f"interp: {exc}") from None
         u = self._input_function(times, inputs, interp)
+        started = time.perf_counter()
         result = self._advance(state, times, u)
+        took = time.perf_counter() - started
         self._runs += 1
-        if self._configured_marks is not None and (self._runs <= ATTRIBUTES_WATCHED or self._runs % WATCH_EVERY == 0):
+        if self._configured_marks is not None and (self._runs <= ATTRIBUTES_WATCHED or self._runs >= self._next_look):
             self._watch_attributes(times)
         if type(result) is not tuple or len(result) != 2:
             got = f"a tuple of {len(result)}" if isinstance(result, tuple) else type(result).__name__
@@ -403,7 +416,7 @@ class Runtime:
         end_state = self._check_state(end_state, state.size, "the end state advance() returned", from_model=True,
                                       over=times)
         if not self._rerun_checked:
-            self._check_rerun(state, times, u, checked, end_state)
+            self._check_rerun(state, times, u, checked, took)
         if trial is not None:
             self._commit(trial)
         end = float(times[-1])
@@ -424,8 +437,14 @@ class Runtime:
         """Refuse a model whose attributes are no longer what configure left (but the caches it declares): what
         evolves there is not rolled back, and a repeated stage integrates it again."""
         assert self._configured_marks is not None
-        changed = _changed_attributes(self._configured_marks, _attribute_marks(self.model))
+        started = time.perf_counter()
+        changed = _changed_attributes(self._configured_marks, _attribute_marks(self.model, MARKED_WHOLE))
         since, self._watched_until = self._watched_until, float(times[-1])
+        if self._runs >= self._next_look:  # (a model with large arrays: looked at less often, at most 1 % of its time)
+            now = time.perf_counter()
+            if now - started > WATCH_SHARE * (started - self._looked):
+                self._watch_every *= 2
+            self._next_look, self._looked = self._runs + self._watch_every, now
         if not changed:
             return
         when = (f"over t in [{times[0]:g}, {times[-1]:g}]" if self._runs <= ATTRIBUTES_WATCHED else
@@ -437,19 +456,29 @@ class Runtime:
                          "tests a model for this)")
 
     def _check_rerun(self, state: np.ndarray, times: np.ndarray, u: Callable, outputs: Mapping[str, np.ndarray],
-                     end_state: np.ndarray) -> None:
-        """The first run after a configure is made twice: the second must give the same bits. A model that steps a
-        helper object of its own (a legacy simulation's instance), or a module-level variable, passes the attribute
-        check (a helper object may be reloaded from the state each time, which is right) but not this."""
-        if not _same_bits(self._advance(state, times, u), outputs, end_state):
-            raise CosimError("model_error", "advance() gave another answer when called again on the same "
-                             f"state, times and inputs (over t in [{times[0]:g}, {times[-1]:g}], the first run after "
-                             "configure, made twice to check this): it keeps something between calls outside the state "
-                             "vector (a helper object it steps, a module-level variable, a random generator?); every "
-                             "stage and every rollback runs advance() again from the committed state, so all that "
-                             "evolves belongs in the state vector (docs/tutorial.md, 'Wrapping an existing "
-                             "simulation')")
+                     took: float) -> None:
+        """The first run after a configure, when quicker than RERUN_LIMIT, is made twice: the second must give the
+        same outputs, bit for bit. A model that steps a helper object of its own (a legacy simulation's instance), or
+        a module-level variable, passes the attribute check (a helper object may be reloaded from the state each
+        time, which is right) but not this. (Outputs only: an FMU's serialized state may hold bytes it does not
+        promise to repeat.)"""
         self._rerun_checked = True
+        if took > RERUN_LIMIT:
+            return
+        checking = (f"over t in [{times[0]:g}, {times[-1]:g}], the first run after configure, made twice to check that "
+                    "it gives the same outputs")
+        try:
+            again = self._advance(state, times, u)
+        except CosimError as exc:
+            raise CosimError(exc.code, f"advance() called again on the same state, times and inputs ({checking}) "
+                             f"failed: {exc.message}", exc.traceback) from None
+        if not _same_outputs(again, outputs):
+            raise CosimError("model_error", f"advance() gave other outputs when called again on the same state, times "
+                             f"and inputs ({checking}): it keeps something between calls outside the state vector (a "
+                             "helper object it steps, a module-level variable, a random generator?), or its arithmetic "
+                             "differs from call to call (a parallel sum in varying order); every stage and every "
+                             "rollback runs advance() again from the committed state, so all that evolves belongs in "
+                             "the state vector (docs/tutorial.md, 'Wrapping an existing simulation')")
 
     def commit(self) -> dict:
         self._require_configured()

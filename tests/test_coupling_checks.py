@@ -43,9 +43,10 @@ def test_temperatures_in_two_scales_are_told_to_convert_with_an_offset(source_un
         check_units([Coupling.make("ctl.T", "panel.T")], {"ctl": {"T": target_unit}}, {"panel": {"T": source_unit}})
     assert ("convert with a transform (transform = \"linear\", params = { gains = [1.0], offset = ... }: a scale with "
             "an offset, K = degC + 273.15)") in str(err.value), err.value
-    with pytest.raises(CouplingError) as err:  # coulomb and farad are no temperatures: a gain, as before
-        check_units([Coupling.make("ctl.T", "panel.T")], {"ctl": {"T": "F"}}, {"panel": {"T": "C"}})
-    assert "(transform = \"gain\", params = { k = ... })" in str(err.value)
+    for other in ({"ctl": {"T": "F"}}, {"panel": {"T": "C"}}), ({"ctl": {"T": "degC"}}, {"panel": {"T": "\u00b0C"}}):
+        with pytest.raises(CouplingError) as err:  # coulomb and farad; one scale spelled two ways: no offset
+            check_units([Coupling.make("ctl.T", "panel.T")], *other)
+        assert "(transform = \"gain\", params = { k = ... })" in str(err.value)
 
 
 def test_every_coupling_between_other_units_is_named_at_once() -> None:

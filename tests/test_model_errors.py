@@ -423,9 +423,10 @@ def test_a_model_keeping_state_outside_its_attributes_is_refused_at_its_first_ru
     with pytest.raises(SubsimError) as err:
         h.run_interval(np.linspace(0.0, 0.4, 3), {port: np.ones((3, 1))})
     assert err.value.code == "model_error", err.value
-    assert ("advance() gave another answer when called again on the same state, times and inputs (over t in [0, 0.4], "
-            "the first run after configure, made twice to check this): it keeps something between calls outside the "
-            "state vector (a helper object it steps, a module-level variable") in str(err.value), err.value
+    assert ("advance() gave other outputs when called again on the same state, times and inputs (over t in [0, 0.4], "
+            "the first run after configure, made twice to check that it gives the same outputs): it keeps something "
+            "between calls outside the state vector (a helper object it steps, a module-level variable") \
+        in str(err.value), err.value
     assert h.status()["time"] == 0.0 and not h.status()["has_trial"]  # nothing committed, no trial to commit
 
 
@@ -447,3 +448,58 @@ def test_an_attribute_that_changes_late_in_the_run_is_found_at_a_later_look() ->
     assert str(err.value).startswith("m.run_interval: [model_error] advance() changed the model's attribute(s) "
                                      "['saturated'] (found over t in [6, 6.4], in one of the runs since the look at "
                                      "t = 1.2): what evolves belongs in the state vector"), err.value
+
+
+class _OnlyOnce(_SteppedHelper):
+    """A legacy object that refuses to step back to a time it has passed: only the repeated call fails."""
+
+    def advance(self, state, times, u):
+        if self.panel.temperature != 20.0:
+            raise RuntimeError("cannot step backwards")
+        return super().advance(state, times, u)
+
+
+def test_a_failure_of_the_repeated_first_run_says_it_was_the_repeat() -> None:
+    h = InProcessHandle(_OnlyOnce(), "m")
+    h.configure({})
+    with pytest.raises(SubsimError) as err:
+        h.run_interval(np.linspace(0.0, 0.4, 3), {"power": np.ones((3, 1))})
+    assert str(err.value).startswith("m.run_interval: [model_exception] advance() called again on the same state, "
+                                     "times and inputs (over t in [0, 0.4], the first run after configure, made twice "
+                                     "to check that it gives the same outputs) failed: advance() raised RuntimeError: "
+                                     "cannot step backwards"), err.value
+
+
+def test_a_slow_first_run_is_not_made_twice(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Its doubled time would eat into the first requests' deadline (a review): above RERUN_LIMIT it runs once."""
+    import cosim.runtime as runtime
+
+    monkeypatch.setattr(runtime, "RERUN_LIMIT", -1.0)  # every first run counts as slow
+    h = InProcessHandle(_SteppedHelper(), "m")
+    h.configure({})
+    h.run_interval(np.linspace(0.0, 0.4, 3), {"power": np.ones((3, 1))})  # not repeated: not refused
+
+
+class _BigTable(_Cached):
+    """Reads a large table it keeps: pure, but each look at its attributes digests 8 MB."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.big = np.arange(1_000_000.0)
+
+
+def test_looks_at_large_attributes_grow_rarer_and_keep_a_digest(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A model with a 61 MiB table paid 68 ms every 16th run and held a second copy of it for the run (a review)."""
+    import cosim.runtime as runtime
+
+    rt = runtime.Runtime(_BigTable(), "m")
+    rt.configure({})
+    kept = rt._configured_marks["big"]
+    assert kept[0] == "array" and len(kept[3]) < 100  # a digest, not 8 MB of bytes
+    monkeypatch.setattr(runtime, "WATCH_SHARE", 0.0)  # every look costs too much: the period doubles each time
+    looks = []
+    watch = rt._watch_attributes
+    monkeypatch.setattr(rt, "_watch_attributes", lambda times: (looks.append(rt._runs), watch(times)))
+    for i in range(200):
+        rt.run_interval(np.linspace(0.4 * i, 0.4 * (i + 1), 3), {"u": np.zeros((3, 1))}, commit=i > 0)
+    assert looks == [1, 2, 3, 16, 48, 112], looks

@@ -178,15 +178,18 @@ def check_units(couplings: Sequence[Coupling], inputs: Units, outputs: Units) ->
         first = couplings[bad[0][0]]
         ends = {_unit(outputs[first.sources[0].subsim][first.sources[0].port]),
                 _unit(inputs[first.target.subsim][first.target.port])}
+        scales = {OFFSET_UNITS.get(unit) for unit in ends}
         convert = ("transform = \"linear\", params = { gains = [1.0], offset = ... }: a scale with an offset, "
-                   "K = degC + 273.15" if ends <= OFFSET_UNITS else "transform = \"gain\", params = { k = ... }")
+                   "K = degC + 273.15" if None not in scales and len(scales) == 2 else
+                   "transform = \"gain\", params = { k = ... }")
         raise CouplingError(bad[0][0], f"{bad[0][1]}: if it is one quantity in two units, convert with a transform "
                             f"({convert}) or declare the ports in one unit; if not, the coupling joins the wrong "
                             f"ports{others}")
 
 
 # temperature scales with an offset between them: a gain alone does not convert them (a legacy-code probe)
-OFFSET_UNITS = frozenset({"K", "degC", "\u00b0C", "degF", "\u00b0F", "degR", "\u00b0R"})  # (not C or F: coulomb, farad)
+OFFSET_UNITS = {"K": "K", "degC": "C", "\u00b0C": "C", "degF": "F", "\u00b0F": "F", "degR": "R",
+                "\u00b0R": "R"}  # unit -> its scale (not C or F alone: coulomb, farad)
 
 
 def _unit(text: str) -> str:

@@ -138,8 +138,8 @@ class FmuSubsim(Subsim):
     def __deepcopy__(self, memo: dict) -> FmuSubsim:
         """A fresh, unconfigured copy (the runtime copies its prototype at every configure)."""
         new = object.__new__(type(self))
-        new.fmu_path, new.info, new.kind, new._holder = self.fmu_path, self.info, self.kind, [None]
-        for attr in ("inputs", "outputs"):
+        new.fmu_path, new.info, new.kind, new._holder, new._step = self.fmu_path, self.info, self.kind, [None], []
+        for attr in ("inputs", "outputs", "not_ports"):
             if attr in self.__dict__:
                 setattr(new, attr, copy.copy(self.__dict__[attr]))
         return new

@@ -189,6 +189,8 @@ def test_a_coupling_naming_a_variable_that_is_no_port_says_why(fmus: dict[str, P
     """An Int32 output or input of an FMU is no port: a coupling naming one was refused as "has no output 'count'"
     (the user sees the variable in the FMU; an FMI probe). The reason travels in describe's not_ports, over the wire
     too."""
+    prototype = Runtime(FmuSubsim(fmus["mass3_extras"]), name="box")  # before configure too (a review)
+    assert prototype.describe()["not_ports"]["count"] == "an Int32 output: only real outputs are ports"
     rt = Runtime(FmuSubsim, name="box")
     rt.configure({"fmu": str(fmus["mass3_extras"])})
     described = decode_reply("describe", answer(rt, encode_request("describe")))
@@ -226,7 +228,8 @@ def test_an_fmu_that_cannot_change_its_communication_step_is_not_stepped_another
                                     b'canHandleVariableCommunicationStepSize="false"')
             dst.writestr(item, data)
     assert read_fmu(fixed).fixed_step
-    rt = Runtime(FmuSubsim, name="fixed")
+    rt = Runtime(FmuSubsim(fixed), name="fixed")  # a prototype, copied at configure (as python -m subsims.fmu serves)
+    assert rt.describe()["inputs"].keys() == {"F"}
     rt.configure({"fmu": str(fixed), "u0": 0.5})
     rt.run_interval(T, {"F": np.zeros((5, 1))})
     rt.run_interval(T + 0.4, {"F": np.zeros((5, 1))}, commit=True)  # the same step: runs
