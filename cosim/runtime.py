@@ -7,6 +7,7 @@ Every command either succeeds or raises ``CosimError`` with nothing committed ch
 from __future__ import annotations
 
 import copy
+import functools
 import hashlib
 import math
 import os
@@ -65,8 +66,15 @@ def _attribute_marks(model: object, whole: int = 0) -> dict[str, Any]:
     """What tells a model's attribute changed (:func:`_mark` of each, but for the caches it declares);
     :func:`_changed_attributes` compares two. ``whole``: bytes up to which an array is kept as its bytes (above: a
     digest of them; 0: DIGESTED)."""
-    caches = set(getattr(model, "caches", ()))
+    caches = set(getattr(model, "caches", ())) | _cached_properties(type(model))
     return {k: _marked(v, whole) for k, v in vars(model).items() if k not in caches}
+
+
+@functools.lru_cache(maxsize=64)
+def _cached_properties(cls: type) -> frozenset[str]:
+    """The names of a class's functools.cached_property attributes: computed once from the instance, a cache (one
+    reached first late in a run was refused as a changed attribute: a review)."""
+    return frozenset(k for c in cls.__mro__ for k, v in vars(c).items() if isinstance(v, functools.cached_property))
 
 
 def _marked(v: Any, whole: int = 0) -> Any:

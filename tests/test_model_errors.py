@@ -3,6 +3,7 @@ under a one-line summary; nothing committed changes. Runs the CLI as a process, 
 
 from __future__ import annotations
 
+import functools
 import subprocess
 import sys
 from collections import deque
@@ -503,3 +504,23 @@ def test_looks_at_large_attributes_grow_rarer_and_keep_a_digest(monkeypatch: pyt
     for i in range(200):
         rt.run_interval(np.linspace(0.4 * i, 0.4 * (i + 1), 3), {"u": np.zeros((3, 1))}, commit=i > 0)
     assert looks == [1, 2, 3, 16, 48, 112], looks
+
+
+class _LazyTable(_Cached):
+    """A functools.cached_property reached first late in the run: computed once from the instance, a cache."""
+
+    @functools.cached_property
+    def doubled(self) -> float:
+        return 2.0 * float(self.table[1])
+
+    def advance(self, state, times, u):
+        value = self.doubled if times[0] > 8.0 else 1.0
+        return {"x": np.full((times.size, 1), value)}, state
+
+
+def test_a_cached_property_filled_late_is_no_changed_attribute() -> None:
+    h = InProcessHandle(_LazyTable(), "m")
+    h.configure({})
+    for i in range(40):  # past the look at the 32nd run
+        out = h.run_interval(np.linspace(0.4 * i, 0.4 * (i + 1), 3), {"u": np.zeros((3, 1))}, commit=i > 0)
+    assert out.outputs["x"][0, 0] == 2.0
