@@ -270,6 +270,19 @@ def open_session(
     return session
 
 
+def unchecked_tolerances(settings: Settings, plan: Plan) -> list[str]:
+    """A line for each [tolerances] signal this run's method never checks: one table serves both methods, so a
+    tolerance meant for the other was dropped without a word when the method was switched (a docs probe)."""
+    if settings.method == "centralized":
+        checked = {f"{name}.{port}" for name, ports in plan.outputs.items() for port in ports}
+        what = "outputs"
+    else:
+        checked = {str(c.target) for c in plan.feedback}
+        what = f"the fed-back inputs: {', '.join(sorted(checked)) or 'none'}"
+    return [f"[tolerances.{name!r}] does not apply to this {settings.method} run, which checks {what}"
+            for name in settings.tolerances if name not in checked]
+
+
 def _may_start_again(session: Session, exc: SubsimError, name: str) -> bool:
     """Whether subsim ``name``'s process, started on this machine, which ``exc`` says was killed by a signal (a
     crash, the OOM killer; not an exit of its own, which would come again) or did not come up while it ran (stopped,
@@ -639,6 +652,8 @@ def run_scenario(
                 shown = ", ".join(modules[:4]) + (f" and {len(modules) - 4} more" if len(modules) > 4 else "")
                 log(f"cosim: {name}'s code is not what the run had when its resume point at t = {saved.point.t:g} "
                     f"was saved ({shown} changed since): the results before that point came from the earlier code")
+        for line in unchecked_tolerances(settings, session.plans[method]):
+            log(f"cosim: {line}")
         spec = scenario.run
         restarts = session.restarts_left  # (those a subsim lost while it started used are gone)
         recovery = None

@@ -11,6 +11,8 @@ from cosim.results import read_results
 from cosim.runner import open_session, run_scenario
 from cosim.scenario import ScenarioError, load
 
+ROOT = Path(__file__).parents[1]
+
 # y' = u: with u held at c, y(t) = c t (Gauss quadrature, exact up to rounding)
 SCENARIO = """
 stop = 1.0
@@ -73,3 +75,20 @@ def test_held_values_must_be_numbers(tmp_path: Path, value: str) -> None:
     with pytest.raises(ScenarioError) as err:
         load(write(tmp_path, SCENARIO.replace("u = [3.0, -0.5]", f"u = {value}")))
     assert "[subsims.a.inputs.u] must be a number or a list of numbers" in str(err.value)
+
+
+def test_a_tolerance_the_runs_method_never_checks_is_said(tmp_path: Path) -> None:
+    """One [tolerances] table serves both methods: a tolerance on an input (a distributed run's) was dropped without
+    a word by a centralized run, and one on an output by a distributed run (a docs probe)."""
+    text = (ROOT / "scenarios" / "oscillator.toml").read_text()
+    scenario = tmp_path / "tol.toml"
+    scenario.write_text(text + '\n[tolerances."mass1.F"]\nabs = 1e-3\n\n[tolerances."mass2.u"]\nabs = 1e-3\n')
+    said: dict[str, list[str]] = {}
+    for method in ("centralized", "distributed"):
+        said[method] = []
+        run_scenario(load(scenario), method=method, stop=0.1, output=tmp_path / f"{method}.csv", inprocess=True,
+                     progress=False, log=said[method].append)
+    assert said["centralized"] == ["cosim: [tolerances.'mass1.F'] does not apply to this centralized run, which checks "
+                                   "outputs"]
+    assert said["distributed"] == ["cosim: [tolerances.'mass2.u'] does not apply to this distributed run, which checks "
+                                   "the fed-back inputs: mass1.F"]
