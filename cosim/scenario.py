@@ -224,7 +224,10 @@ class Scenario:
 def check_subsim_name(name: str) -> str:
     """A scenario's subsim name: a bus name (``check_name``) without '.', which separates a subsim from its
     port in signal names (``subsim.port``). ValueError in one line."""
-    check_name(name, "subsim name")
+    try:
+        check_name(name, "subsim name")
+    except ValueError:  # (the bus's own words allowed '.': a docs probe)
+        raise ValueError(f"subsim name {name!r} must be 1-64 characters of letters, digits, '_' or '-'") from None
     if "." in name:
         raise ValueError(f"subsim name {name!r} has a '.', which separates a subsim from its port in signal "
                          f"names ('{name}.<port>' would read as subsim {name.partition('.')[0]!r}); "

@@ -74,6 +74,8 @@ def test_good_scenario_loads_with_per_method_settings(tmp_path: Path) -> None:
         ("stop = 1.0", 'stop = 1.0\n[unified]\nfuncton = "m:f"', "unified", "unknown key(s) ['funct"),
         ('[subsims.b]\nmodel = "subsims.integrator.subsim:Integrator"', "[subsims.b]", "subsims.b", "needs model"),
         ("[subsims.b]", '[subsims."b.1"]', "subsims.b.1", "has a '.', which separates a subsim from its port"),
+        ("[subsims.b]", f'[subsims.{"b" * 65}]', f"subsims.{'b' * 65}",  # (it said '.' was allowed: a docs probe)
+         "must be 1-64 characters of letters, digits, '_' or '-'"),
         # a subsim started on another machine (launcher)
         ("[subsims.b]", "[subsims.b]\nlauncher = 'ssh lab-2'", "subsims.b.launcher", "non-empty list of strings"),
         ("[subsims.b]", "[subsims.b]\nlauncher = []", "subsims.b.launcher", "non-empty list of strings"),
