@@ -39,7 +39,11 @@ def _apply(k: np.ndarray, x: np.ndarray) -> np.ndarray:
         return k * x
     if k.ndim == 2 and k.shape[1] == x.shape[1]:
         return x @ k.T
-    raise ValueError(f"gain of shape {k.shape} does not apply to a signal of width {x.shape[1]}")
+    if k.ndim == 1:  # (it read "gain of shape (3,) does not apply to a signal of width 3": a probe)
+        raise ValueError(f"a gain is a number or a matrix (a list of rows), got a list of {k.size} numbers: for one "
+                         f"gain per channel give the diagonal matrix {np.diag(k).tolist()}")
+    raise ValueError(f"gain of shape {k.shape} does not apply to a signal of width {x.shape[1]}: a matrix needs "
+                     f"{x.shape[1]} columns")
 
 
 BUILTIN: dict[str, Transform] = {"identity": identity, "gain": gain, "linear": linear}

@@ -89,3 +89,29 @@ def test_cosim_run_refuses_a_unit_mismatch_before_the_first_interval(tmp_path: P
     assert "coupling mass1.v -> wheel.omega: units differ, the output is in 'm/s' and the input takes 'deg/s'" \
         in done.stderr and len(done.stderr.strip().splitlines()) == 1, done.stderr
     assert not [p for p in (tmp_path / "results").rglob("*")]  # nothing was written
+
+
+def test_a_port_on_the_wrong_side_of_a_coupling_is_said_to_be_swapped() -> None:
+    """to = an output and from = an input read only "has no input 'torque' (inputs: ...)" (a five-subsim probe)."""
+    inputs, outputs = {"adcs": {"q": 4}, "att": {"torque": 3}}, {"adcs": {"torque": 3}, "att": {"q": 4}}
+    with pytest.raises(CouplingError) as err:
+        check_couplings([Coupling.make("adcs.torque", "att.torque")], inputs, outputs)
+    assert str(err.value) == ("coupling att.torque -> adcs.torque: 'adcs' has no input 'torque' (inputs: q); it is an "
+                              "output there: are to and from swapped?")
+    with pytest.raises(CouplingError) as err:
+        check_couplings([Coupling.make("att.torque", "adcs.q")], inputs, outputs)
+    assert str(err.value).endswith("'adcs' has no output 'q' (outputs: torque); it is an input there: are to and "
+                                   "from swapped?")
+    with pytest.raises(CouplingError) as err:  # a name that is neither: no hint
+        check_couplings([Coupling.make("att.torque", "adcs.tork")], inputs, outputs)
+    assert str(err.value).endswith("has no output 'tork' (outputs: torque)")
+
+
+def test_a_gain_given_as_a_list_of_numbers_is_told_to_be_a_diagonal_matrix() -> None:
+    """k = [1, 1, 1] read "gain of shape (3,) does not apply to a signal of width 3" (a five-subsim probe)."""
+    with pytest.raises(CouplingError) as err:
+        check_couplings([Coupling.make("b.u", "a.x", "gain", {"k": [1.0, 2.0, 3.0]})], {"b": {"u": 3}, "a": {}},
+                        {"a": {"x": 3}, "b": {}})
+    assert str(err.value).endswith("a gain is a number or a matrix (a list of rows), got a list of 3 numbers: for one "
+                                   "gain per channel give the diagonal matrix [[1.0, 0.0, 0.0], [0.0, 2.0, 0.0], "
+                                   "[0.0, 0.0, 3.0]]"), err.value

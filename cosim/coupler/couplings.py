@@ -138,13 +138,15 @@ def _check_one(c: Coupling, inputs: Ports, outputs: Ports, driven: dict[SignalRe
         raise ValueError(f"coupling {c}: unknown subsim {c.target.subsim!r}")
     if c.target.port not in inputs[c.target.subsim]:
         known = ", ".join(inputs[c.target.subsim]) or "none"
-        raise ValueError(f"coupling {c}: {c.target.subsim!r} has no input {c.target.port!r} (inputs: {known})")
+        swap = _reversed(c, c.target.port in outputs.get(c.target.subsim, {}), "an output")
+        raise ValueError(f"coupling {c}: {c.target.subsim!r} has no input {c.target.port!r} (inputs: {known}){swap}")
     for s in c.sources:
         if s.subsim not in outputs:
             raise ValueError(f"coupling {c}: unknown subsim {s.subsim!r}")
         if s.port not in outputs[s.subsim]:
             known = ", ".join(outputs[s.subsim]) or "none"
-            raise ValueError(f"coupling {c}: {s.subsim!r} has no output {s.port!r} (outputs: {known})")
+            swap = _reversed(c, s.port in inputs.get(s.subsim, {}), "an input")
+            raise ValueError(f"coupling {c}: {s.subsim!r} has no output {s.port!r} (outputs: {known}){swap}")
     if c.target in driven:
         raise ValueError(f"input {c.target} is driven twice: by {driven[c.target]} and by {c}; to add them, give "
                          f"one coupling every source in its from, with transform = \"linear\" (params = {{ gains = "
@@ -158,6 +160,11 @@ def _check_one(c: Coupling, inputs: Ports, outputs: Ports, driven: dict[SignalRe
             raise ValueError(f"coupling {c}: size mismatch, output has {src}, input takes {dst}")
         return
     _try_transform(c, inputs, outputs)
+
+
+def _reversed(c: Coupling, other_kind: bool, kind: str) -> str:
+    """The hint for a port named on the wrong side of a coupling (to = an output, from = an input: a probe)."""
+    return f"; it is {kind} there: are to and from swapped?" if other_kind else ""
 
 
 def check_units(couplings: Sequence[Coupling], inputs: Units, outputs: Units) -> None:
