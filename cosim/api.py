@@ -218,6 +218,10 @@ def run(
     if resume:  # the intervals before the resume point are in the file only
         return _from_file(sc, report, output)
     t, signals, diag = collect.arrays()
+    # in the scenario's order of subsims, as the result file's columns (in the run's order, which depends on the
+    # method, two runs' signals misaligned when stacked: a probe)
+    declared = list(sc.subsims)
+    signals = dict(sorted(signals.items(), key=lambda item: declared.index(item[0].partition(".")[0])))
     return Result(sc, report.method, t, signals, diag, report.summary, report.order, report.feedback,
                   Path(output) if output is not None else None)
 
