@@ -37,8 +37,9 @@ class _PrefixedRaw(io.RawIOBase):
     """Bytes written go to file descriptor ``fd`` with ``prefix`` at the start of every line; nothing is held back,
     and once the reader is gone nothing more is written (as :func:`say`)."""
 
-    def __init__(self, fd: int, prefix: bytes) -> None:
+    def __init__(self, fd: int, prefix: bytes, once: bool = False) -> None:
         self._fd, self._prefix, self._at_start, self._gone = fd, prefix, True, False
+        self._once = once  # a line that starts with the prefix already keeps it alone (the subsim's own lines)
 
     def writable(self) -> bool:
         return True
@@ -46,15 +47,20 @@ class _PrefixedRaw(io.RawIOBase):
     def fileno(self) -> int:
         return self._fd
 
+    def _head(self, line: bytes) -> bytes:
+        if not self._at_start or (self._once and line.startswith(self._prefix)):
+            return b""
+        return self._prefix
+
     def write(self, b: bytes | bytearray | memoryview) -> int:  # type: ignore[override]
         data = bytes(b)
         out = bytearray()
         *whole, rest = data.split(b"\n")
         for line in whole:
-            out += (self._prefix if self._at_start else b"") + line + b"\n"
+            out += self._head(line) + line + b"\n"
             self._at_start = True
         if rest:
-            out += (self._prefix if self._at_start else b"") + rest
+            out += self._head(rest) + rest
             self._at_start = False
         view = memoryview(out)
         while view and not self._gone:
@@ -65,11 +71,12 @@ class _PrefixedRaw(io.RawIOBase):
         return len(data)
 
 
-def prefixed_stream(fd: int, prefix: str) -> io.TextIOWrapper:
+def prefixed_stream(fd: int, prefix: str, once: bool = False) -> io.TextIOWrapper:
     """A text stream (with ``buffer``, ``fileno``, ``encoding``, like ``sys.stdout``) onto file descriptor ``fd``
     that puts ``prefix`` (a subsim's name) before each line: what a model prints, told apart from the coordinator's
-    output and from other subsims'. Line buffered."""
-    return io.TextIOWrapper(io.BufferedWriter(_PrefixedRaw(fd, prefix.encode())), encoding="utf-8",
+    output and from other subsims'. Line buffered. ``once``: a line that starts with ``prefix`` already is left as it
+    is (the subsim's own lines on its stderr)."""
+    return io.TextIOWrapper(io.BufferedWriter(_PrefixedRaw(fd, prefix.encode(), once)), encoding="utf-8",
                             errors="backslashreplace", line_buffering=True)
 
 

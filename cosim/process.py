@@ -171,6 +171,7 @@ def main(model_cls: type[Subsim] | Subsim, argv: Sequence[str] | None = None, pr
     if args.quiet_stop:  # launched by cosim run, whose standard output is its results summary: a model's print()
         os.dup2(2, 1)  # goes to stderr, and (from Python) with the subsim's name before each line
         sys.stdout = prefixed_stream(2, f"{args.name}: ")
+        sys.stderr = prefixed_stream(2, f"{args.name}: ", once=True)  # warnings, print(file=sys.stderr): a probe
     signal.signal(signal.SIGTERM, _raise_stop)
     signal.signal(signal.SIGINT, _raise_stop)
     try:

@@ -262,6 +262,7 @@ def test_external_subsim_started_by_hand(tmp_path: Path, procs: list) -> None:
 
 TALKY = '''
 import sys
+import warnings
 import numpy as np
 from cosim import Port, Subsim
 
@@ -281,6 +282,8 @@ class Talky(Subsim):
         for _ in range(20000):  # 20,000 writes without a newline: quadratic once (80 s for this test)
             print(".", end="")
         print()
+        print("to its stderr", file=sys.stderr)
+        warnings.warn("a model warning")
         return {"x": np.zeros((times.size, 1))}, state
 '''
 
@@ -301,6 +304,10 @@ def test_what_a_model_prints_is_on_stderr_under_its_subsims_name(tmp_path: Path)
     for name in ("a", "b"):
         assert lines.count(f"{name}: advancing to 0.10") >= 1 and f"{name}: in parts" in lines, done.stderr
         assert f"{name}: bytes from 2" in lines and f"{name}: {'.' * 20000}" in lines, done.stderr
+        # its stderr too (a NumPy or a model's warning named no subsim: a five-subsim probe), its own lines once
+        assert f"{name}: to its stderr" in lines, done.stderr
+        assert any(x.startswith(f"{name}: ") and "UserWarning: a model warning" in x for x in lines), done.stderr
+        assert not any(x.startswith(f"{name}: {name}: ") for x in lines), done.stderr
 
 
 def _run_in_process(tmp_path: Path, scenario: str, stop: str) -> tuple[subprocess.CompletedProcess, list, np.ndarray]:
