@@ -270,17 +270,23 @@ def open_session(
     return session
 
 
-def unchecked_tolerances(settings: Settings, plan: Plan) -> list[str]:
-    """A line for each [tolerances] signal this run's method never checks: one table serves both methods, so a
-    tolerance meant for the other was dropped without a word when the method was switched (a docs probe)."""
+def unused_settings(settings: Settings, plan: Plan) -> list[str]:
+    """A line for each setting that does nothing in this run: a [tolerances] signal its method never checks (one
+    table serves both methods: a tolerance meant for the other was dropped without a word when the method was
+    switched; a docs probe), speculate in a centralized run, max_halvings with interval = "auto" (a probe)."""
+    lines = []
+    if settings.speculate and settings.method == "centralized":
+        lines.append("speculate does nothing in a centralized run (its subsims run side by side already)")
+    if settings.max_halvings and settings.auto is not None:
+        lines.append("max_halvings does nothing with interval = \"auto\", which shortens a try that fails itself")
     if settings.method == "centralized":
         checked = {f"{name}.{port}" for name, ports in plan.outputs.items() for port in ports}
         what = "outputs"
     else:
         checked = {str(c.target) for c in plan.feedback}
         what = f"the fed-back inputs: {', '.join(sorted(checked)) or 'none'}"
-    return [f"[tolerances.{name!r}] does not apply to this {settings.method} run, which checks {what}"
-            for name in settings.tolerances if name not in checked]
+    return lines + [f"[tolerances.{name!r}] does not apply to this {settings.method} run, which checks {what}"
+                    for name in settings.tolerances if name not in checked]
 
 
 def _may_start_again(session: Session, exc: SubsimError, name: str) -> bool:
@@ -652,7 +658,7 @@ def run_scenario(
                 shown = ", ".join(modules[:4]) + (f" and {len(modules) - 4} more" if len(modules) > 4 else "")
                 log(f"cosim: {name}'s code is not what the run had when its resume point at t = {saved.point.t:g} "
                     f"was saved ({shown} changed since): the results before that point came from the earlier code")
-        for line in unchecked_tolerances(settings, session.plans[method]):
+        for line in unused_settings(settings, session.plans[method]):
             log(f"cosim: {line}")
         spec = scenario.run
         restarts = session.restarts_left  # (those a subsim lost while it started used are gone)

@@ -283,6 +283,12 @@ def test_an_iteration_that_comes_back_to_its_own_values_stops_before_max_stages(
            "stages would only go round again)" in str(err) and "to try: res = 1e-13" in str(err), err
     how, runs, _ = drive_loop(method, lambda u: np.minimum(u + 1.0, 20.0))  # one step a stage, to the limit
     assert how == "committed" and runs == 21, (how, runs)
+    # a relay whose output flips its own input (a thermostat read at the step's end): a cycle far above round-off,
+    # where a shorter interval was advised and did not help (a probe)
+    how, runs, err = drive_loop(method, lambda u: np.where(u > 0.5, 0.0, 1.0))
+    assert how == "not converged" and "came back bit for bit" in str(err), (how, err)
+    assert "to try: a switch in the loop (a relay, a thermostat, a saturation or a quantizer" in str(err) and \
+        "read its input at the start of each sample interval" in str(err) and "shorter [coupling]" not in str(err), err
 
 
 # every stage of the failing signals of the FMU oscillator with both masses in model exchange (rtol 1e-10) and

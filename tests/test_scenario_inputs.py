@@ -92,3 +92,20 @@ def test_a_tolerance_the_runs_method_never_checks_is_said(tmp_path: Path) -> Non
                                    "outputs"]
     assert said["distributed"] == ["cosim: [tolerances.'mass2.u'] does not apply to this distributed run, which checks "
                                    "the fed-back inputs: mass1.F"]
+
+
+def test_settings_that_do_nothing_in_the_run_are_said(tmp_path: Path) -> None:
+    """speculate in a centralized run and max_halvings with interval = "auto" did nothing without a word (a probe)."""
+    text = (ROOT / "scenarios" / "oscillator.toml").read_text().replace("max_stages = 50", "max_stages = 50\n"
+                                                                       "speculate = true\nmax_halvings = 2")
+    scenario = tmp_path / "s.toml"
+    scenario.write_text(text)
+    said: list[str] = []
+    run_scenario(load(scenario), method="centralized", stop=0.1, output=tmp_path / "c.csv", inprocess=True,
+                 progress=False, log=said.append)
+    assert said == ["cosim: speculate does nothing in a centralized run (its subsims run side by side already)"]
+    scenario.write_text(text.replace("interval = 0.05 ", 'interval = "auto" '))
+    said.clear()
+    run_scenario(load(scenario), method="distributed", stop=0.1, output=tmp_path / "d.csv", inprocess=True,
+                 progress=False, log=said.append)
+    assert said == ['cosim: max_halvings does nothing with interval = "auto", which shortens a try that fails itself']

@@ -208,6 +208,12 @@ class NotConverged(RuntimeError):
                          f"FMU's rtol): {name}'s residual goes up and down near {level:.1e} (a relative "
                          f"{level / size:.0e} of its values) with no trend over its last {HOVER_STAGES} stages, the "
                          "models' own error, which no interval or stage count removes")
+        elif cycled:  # bit for bit round again, not in its last bits: a switch (a probe: the advice above failed)
+            lines.append("  to try: a switch in the loop (a relay, a thermostat, a saturation or a quantizer whose "
+                         "input depends, within one sample interval, on what it switches) has no consistent answer, "
+                         "which a shorter interval does not give it: have the model that switches, or the one it "
+                         "drives, read its input at the start of each sample interval (u(times[k]) for the whole "
+                         "step, as a held signal gives it; docs/tutorial.md, section 7)")
         elif "growing" in trends:
             lines.append(f"  to try: {shorter}: the iteration diverges (the residuals grow), the coupling too strong "
                          "for an interval this long")
