@@ -533,7 +533,8 @@ def build_plan(scenario: Scenario, descriptions: dict[str, Description], method:
                 other_model(scenario, name, descriptions[name].model, f"[couplings[{exc.index}]] {exc}",
                             "does not fit the couplings")
         raise ScenarioError(f"{scenario.path}: [couplings[{exc.index}]] {exc}") from None
-    return replace(plan, held=MappingProxyType(held_inputs(scenario, descriptions)))
+    return replace(plan, held=MappingProxyType(held_inputs(scenario, descriptions)),
+                   guess=MappingProxyType(guessed_inputs(scenario, descriptions)))
 
 
 def held_inputs(scenario: Scenario, descriptions: dict[str, Description]) -> dict[str, tuple[float, ...]]:
@@ -556,6 +557,22 @@ def held_inputs(scenario: Scenario, descriptions: dict[str, Description]) -> dic
                                     f"(inputs: {', '.join(d.inputs) or 'none'})")
             held[ref] = values
     return held
+
+
+def guessed_inputs(scenario: Scenario, descriptions: dict[str, Description]) -> dict[str, tuple[float, ...]]:
+    """The values of [subsims.<name>.guess]: each names a coupled input, with one value per channel."""
+    coupled, guessed = {str(c.target) for c in scenario.couplings}, {}
+    for name, d in descriptions.items():
+        for port, values in scenario.subsims[name].guess.items():
+            p, ref = d.inputs.get(port), f"{name}.{port}"
+            why = ("is no input" if p is None else "is fed by no coupling (a constant goes in [subsims."
+                   f"{name}.inputs])" if ref not in coupled else f"takes {p.size} value{'s' if p.size != 1 else ''}, "
+                   f"got {len(values)}" if len(values) != p.size else "")
+            if why:
+                raise ScenarioError(f"{scenario.path}: [subsims.{name}.guess.{port}] {ref} {why} "
+                                    f"(inputs: {', '.join(d.inputs) or 'none'})")
+            guessed[ref] = values
+    return guessed
 
 
 def output_signals(scenario: Scenario, descriptions: dict[str, Description]) -> list[tuple[SignalRef, int]]:

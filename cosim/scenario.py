@@ -58,6 +58,9 @@ KEYS: dict[str, dict[str, Key]] = {
                       "parameters of the model's initial_state; a model that declares its parameters refuses others"),
         "inputs": Key("table", "{}", "the port's",
                       "constant values of inputs no coupling feeds: port = number or [numbers], one per channel"),
+        "guess": Key("table", "{}", "the port's",
+                     "what a coupled input stands at where no value of it is known yet, instead of zeros: the first "
+                     "interval's stage 0 (every interval's with first_guess = 'zero'); port = number or [numbers]"),
         "doc": Key("string", '""', "", "free text"),
         "fmu": Key("string", "none", "", "an FMU file instead of model (relative to the scenario file; needs the fmi "
                    "extra): stands for model = 'subsims.fmu:FmuSubsim' with params.fmu = the path (docs/fmi.md)"),
@@ -169,6 +172,7 @@ class SubsimSpec:
     external: bool
     params: Mapping[str, Any]
     inputs: Mapping[str, tuple[float, ...]] = field(default_factory=dict)  # held constant: port -> values
+    guess: Mapping[str, tuple[float, ...]] = field(default_factory=dict)  # coupled: port -> values before any known
     launcher: tuple[str, ...] = ()  # started elsewhere by this command and one shell line (empty: here)
     workdir: str | None = None  # with launcher: where it runs there
     python: str = "python3"  # with launcher: the Python there
@@ -374,14 +378,19 @@ class _Parser:
             except ValueError as exc:
                 raise self.fail(f"{key}.model", str(exc)) from None
         params = self.table(spec, "params", f"{key}.params")
-        inputs = {}
-        for port, value in self.table(spec, "inputs", f"{key}.inputs").items():
+        inputs, guess = self.port_values(spec, "inputs", key), self.port_values(spec, "guess", key)
+        return SubsimSpec(name, model, external, MappingProxyType(dict(params)), MappingProxyType(inputs),
+                          MappingProxyType(guess), **elsewhere, search_path=self.search_path)
+
+    def port_values(self, spec: Mapping[str, Any], table: str, key: str) -> dict[str, tuple[float, ...]]:
+        """A subsim's table of values by input port (``inputs``, ``guess``): port = number or [numbers]."""
+        found = {}
+        for port, value in self.table(spec, table, f"{key}.{table}").items():
             values = value if isinstance(value, list) else [value]
             if not values or any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in values):
-                raise self.fail(f"{key}.inputs.{port}", f"must be a number or a list of numbers, got {value!r}")
-            inputs[port] = tuple(float(v) for v in values)
-        return SubsimSpec(name, model, external, MappingProxyType(dict(params)), MappingProxyType(inputs),
-                          **elsewhere, search_path=self.search_path)
+                raise self.fail(f"{key}.{table}.{port}", f"must be a number or a list of numbers, got {value!r}")
+            found[port] = tuple(float(v) for v in values)
+        return found
 
     def launcher(self, spec: Mapping[str, Any], key: str, external: bool) -> dict[str, Any]:
         """The launcher keys of a subsim started on another machine, as SubsimSpec fields ({} if none)."""

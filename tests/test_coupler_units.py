@@ -11,7 +11,7 @@ import pytest
 
 from cosim.coupler.convergence import Tolerance, check, convrg
 from cosim.coupler.couplings import Coupling, SignalRef
-from cosim.coupler.first_guess import first_guess
+from cosim.coupler.first_guess import POLICIES, first_guess
 from cosim.coupler.order import derive_order, feedback_weight
 from cosim.coupler.relaxation import Interval, Settings
 from cosim.driver import Coordinator
@@ -351,3 +351,20 @@ def test_a_stop_while_an_interval_is_being_recorded_in_steps_still_records_it_wh
     stop = log.index(("stop",))
     assert [e[1] for e in log if e[0] == "recorded"] == pytest.approx(committed) and committed
     assert any(e[0] == "step" for e in log[stop:])  # the interrupted interval's steps were finished after the stop
+
+
+def test_a_start_value_stands_in_for_the_zeros_of_every_policy() -> None:
+    """[subsims.<name>.guess]: where no value is known (the first interval; every interval with 'zero') a signal
+    starts at its given value; where one is known, the policy's value as before."""
+    times = np.linspace(0.0, 1.0, 3)
+    start = {"b.q": (1.0, 0.0)}
+    previous = {"b.q": (np.linspace(-1.0, 0.0, 3), np.array([[0.5, 0.5], [0.6, 0.4], [0.7, 0.3]])),
+                "b.r": (np.linspace(-1.0, 0.0, 3), np.ones((3, 1)))}
+    for policy in POLICIES:
+        first = first_guess(policy, times, {"b.q": 2, "b.r": 1}, None, "linear", start)
+        assert first["b.q"].tolist() == [[1.0, 0.0]] * 3 and first["b.r"].tolist() == [[0.0]] * 3
+        later = first_guess(policy, times, {"b.q": 2, "b.r": 1}, previous, "linear", start)
+        if policy == "zero":
+            assert later["b.q"].tolist() == [[1.0, 0.0]] * 3 and later["b.r"].tolist() == [[0.0]] * 3
+        else:
+            assert later["b.q"][0].tolist() == [0.7, 0.3] and later["b.r"].tolist() == [[1.0]] * 3

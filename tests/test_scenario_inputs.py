@@ -109,3 +109,60 @@ def test_settings_that_do_nothing_in_the_run_are_said(tmp_path: Path) -> None:
     run_scenario(load(scenario), method="distributed", stop=0.1, output=tmp_path / "d.csv", inprocess=True,
                  progress=False, log=said.append)
     assert said == ['cosim: max_halvings does nothing with interval = "auto", which shortens a try that fails itself']
+
+
+POINTING = '''
+import numpy as np
+from cosim import Port, Subsim
+
+
+class Body(Subsim):
+    """A unit quaternion turning about z at a rate the torque sets (q = [cos(a/2), 0, 0, sin(a/2)])."""
+    inputs = {"torque": Port(1)}
+    outputs = {"q": Port(4)}
+
+    def initial_state(self, params):
+        return np.array([0.3])
+
+    def advance(self, state, times, u):
+        a = state[0] + (times - times[0]) * (0.1 + u(times)["torque"][:, 0])
+        q = np.column_stack([np.cos(a / 2), 0 * a, 0 * a, np.sin(a / 2)])
+        return {"q": q}, np.array([a[-1]])
+
+
+class Pointer(Subsim):
+    """Takes the quaternion's angle: a zero quaternion has none."""
+    inputs = {"q": Port(4)}
+    outputs = {"torque": Port(1)}
+
+    def initial_state(self, params):
+        return np.zeros(0)
+
+    def advance(self, state, times, u):
+        q = u(times)["q"]
+        norm = np.linalg.norm(q, axis=1)
+        if not np.all(norm > 0.5):
+            raise ValueError(f"not a unit quaternion: {q[0].tolist()}")
+        return {"torque": (-0.01 * 2 * np.arctan2(q[:, 3], q[:, 0]))[:, None]}, state
+'''
+
+
+def test_a_guess_stands_in_for_the_zeros_a_coupled_input_starts_from(tmp_path: Path) -> None:
+    """A centralized run feeds zeros to every input at the first stage: a model taking a quaternion could not start,
+    and nothing could be given instead (a five-subsim probe). [subsims.<name>.guess] gives it; widths and ports are
+    checked."""
+    (tmp_path / "pointing.py").write_text(POINTING)
+    base = ('stop = 1.0\n[coupling]\ninterval = 0.25\nmethod = "centralized"\n[subsims.body]\nmodel = '
+            '"pointing:Body"\n[subsims.pointer]\nmodel = "pointing:Pointer"\n[[couplings]]\nto = "pointer.q"\nfrom = '
+            '"body.q"\n[[couplings]]\nto = "body.torque"\nfrom = "pointer.torque"\n')
+    scenario = tmp_path / "p.toml"
+    scenario.write_text(base)
+    with pytest.raises(Exception, match=r"not a unit quaternion: \[0.0, 0.0, 0.0, 0.0\]"):
+        run_scenario(load(scenario), stop=0.5, output=tmp_path / "z.csv", inprocess=True, progress=False)
+    scenario.write_text(base + "[subsims.pointer.guess]\nq = [1.0, 0.0, 0.0, 0.0]\n")
+    report = run_scenario(load(scenario), stop=0.5, output=tmp_path / "g.csv", inprocess=True, progress=False)
+    assert report.summary.t_end == 0.5
+    for guess, why in (("q = [1.0, 0.0]", "pointer.q takes 4 values, got 2"), ("w = 1.0", "pointer.w is no input")):
+        scenario.write_text(base + f"[subsims.pointer.guess]\n{guess}\n")
+        with pytest.raises(ScenarioError, match=rf"\[subsims.pointer.guess.\w\] {why}"):
+            run_scenario(load(scenario), stop=0.5, output=tmp_path / "e.csv", inprocess=True, progress=False)

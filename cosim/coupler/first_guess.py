@@ -4,7 +4,9 @@
 - ``hold``: the last committed value of each input, held over the interval.
 - ``extrapolate``: the previous interval's converged input, continued over the new interval by
   the coupling's interpolation scheme (its end piece).
-The first interval of a run has no previous one: every policy starts it with zeros.
+The first interval of a run has no previous one: every policy starts it with zeros, or with the values a scenario
+gives in ``[subsims.<name>.guess]`` (a quaternion or a unit vector cannot be zero), which stand in for the zeros of
+``zero`` too.
 """
 
 from __future__ import annotations
@@ -24,14 +26,18 @@ def first_guess(
     sizes: Mapping[str, int],
     previous: Mapping[str, tuple[np.ndarray, np.ndarray]] | None,
     interp: str = "linear",
+    start: Mapping[str, tuple[float, ...]] | None = None,
 ) -> dict[str, np.ndarray]:
-    """``{signal: (n, size)}`` for every signal in ``sizes``; ``previous`` maps signal -> (times, values)."""
+    """``{signal: (n, size)}`` for every signal in ``sizes``; ``previous`` maps signal -> (times, values); ``start``
+    maps a signal to its value where no value is known (the zeros otherwise)."""
     if policy not in POLICIES:
         raise ValueError(f"unknown first-guess policy {policy!r}; known: {', '.join(POLICIES)}")
     guess = {}
     for name, size in sizes.items():
         if policy == "zero" or not previous or name not in previous:
-            guess[name] = np.zeros((times.size, size))
+            known = None if start is None else start.get(name)
+            guess[name] = np.zeros((times.size, size)) if known is None else np.tile(
+                np.asarray(known, dtype=np.float64), (times.size, 1))
         elif policy == "hold":
             guess[name] = np.tile(previous[name][1][-1], (times.size, 1))
         else:

@@ -24,6 +24,8 @@ class Plan:
     feedback: tuple[Coupling, ...]  # couplings with a source at or after their target in ``order``
     forward: tuple[Coupling, ...]
     held: Mapping[str, tuple[float, ...]] = field(default_factory=dict)  # "subsim.port" -> constant; else zero
+    guess: Mapping[str, tuple[float, ...]] = field(default_factory=dict)  # "subsim.port" -> its value before any
+    # is known (stage 0 of the first interval, every stage 0 with first_guess = "zero"); else zero
 
     @property
     def sizes(self) -> dict[SignalRef, int]:

@@ -624,7 +624,8 @@ class Relaxation:
 
     def _guess(self, times: np.ndarray, couplings: Evaluations) -> dict[str, np.ndarray]:
         sizes = {k: w for k, _, w in couplings}
-        return first_guess(self.settings.first_guess, times, sizes, self._previous, self.settings.interp)
+        return first_guess(self.settings.first_guess, times, sizes, self._previous, self.settings.interp,
+                           self.plan.guess)
 
     def _inputs_of(self, name: str, signals: Mapping[str, np.ndarray], n: int) -> dict[str, np.ndarray]:
         """Inputs of ``name`` from coupled ``signals``; an uncoupled input is its held constant, else zero."""
