@@ -181,7 +181,8 @@ def test_not_converged_says_what_to_try_from_how_the_residuals_went() -> None:
     falling = str(NotConverged(0.0, 0.4, 5, ["a.x"], {"a.x": [1e-3, 1e-4, 1e-5]}))
     two = str(NotConverged(0.0, 0.4, 2, ["a.x"], {"a.x": [1e-3, 2e-3]}))  # too few stages to say how they go
     assert two.splitlines()[-1] == "  to try: more [coupling] max_stages, or a shorter [coupling] interval " \
-                                   "(max_halvings > 0 halves it only where needed)"
+                                   "(interval = \"auto\" keeps it short only where needed; max_halvings > 0 " \
+                                   "retries a failed one shorter, every interval from its full length first)"
     stuck = str(NotConverged(0.0, 0.4, 50, ["a.x", "b.y"], {"a.x": [1e-3, 2e-3, 1.5e-3, 1.6e-3],
                                                           "b.y": [1e-3, 1e-4]}))
     assert "to try: more [coupling] max_stages" in falling.splitlines()[-1]

@@ -193,7 +193,8 @@ class NotConverged(RuntimeError):
         for name in failing:
             hist = ", ".join(f"{r:.3e}" for r in residuals[name][-8:])
             lines.append(f"  {name}: residual by stage (last {min(8, len(residuals[name]))}) [{hist}]")
-        shorter = "a shorter [coupling] interval (max_halvings > 0 halves it only where needed)"
+        shorter = ("a shorter [coupling] interval (interval = \"auto\" keeps it short only where needed; "
+                   "max_halvings > 0 retries a failed one shorter, every interval from its full length first)")
         trends = {_trend(residuals[n]) for n in failing}
         roundoff = _roundoff(failing, residuals, values, cycled) if trends == {"stalled"} or cycled else None
         hovering = None if roundoff is not None else _hovering(failing, residuals, values)
