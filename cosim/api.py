@@ -213,7 +213,10 @@ def run(
                                   resume=resume, record=output is not None)
     except (ScenarioError, OutputError) as exc:  # the command's words, for its options: this caller's arguments
         if len(exc.args) == 1 and isinstance(exc.args[0], str):
-            exc.args = (in_api_words(exc.args[0]),)
+            said = in_api_words(exc.args[0])
+            if any(f"[subsims.{name}.params]" in said for name in params or ()):  # (it blamed the file: a probe)
+                said += " (the params= of this call are merged over the file's)"
+            exc.args = (said,)
         raise
     if resume:  # the intervals before the resume point are in the file only
         return _from_file(sc, report, output)

@@ -72,8 +72,9 @@ def test_params_override_the_scenario_for_one_run(tmp_path: Path) -> None:
     assert moved["mass2.u"][0, 0] == 0.5 and moved["mass1.u"][0, 0] == 1.0
     with pytest.raises(ScenarioError, match="unknown subsim 'mass3'"):
         cosim.run(OSCILLATOR, stop=0.1, inprocess=True, params={"mass3": {"u0": 0.5}})
-    with pytest.raises(ScenarioError, match="did you mean 'u0'"):
+    with pytest.raises(ScenarioError, match="did you mean 'u0'") as err:
         cosim.run(OSCILLATOR, stop=0.1, inprocess=True, params={"mass2": {"u_0": 0.5}})
+    assert str(err.value).endswith("(the params= of this call are merged over the file's)"), err.value  # (a probe)
 
 
 def test_resume_goes_on_with_an_interrupted_run_and_returns_the_whole_run(tmp_path: Path) -> None:
