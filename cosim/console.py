@@ -143,7 +143,8 @@ class StderrRelay:
 def _stderr_writer() -> Callable[[bytes], None]:
     """Where a child's stderr is copied, looked up at each write: ``sys.stderr`` when something was put in its place
     (a notebook's stream, a test's capture), decoded as UTF-8 (a notebook showed none of it: an API probe); else this
-    process's stderr descriptor, if it has one. Raises OSError or ValueError once that is gone."""
+    process's stderr descriptor, if it has one. Raises OSError once that descriptor is gone (a chunk a replaced
+    stream cannot take is dropped alone)."""
     decode = codecs.getincrementaldecoder("utf-8")("backslashreplace").decode  # (a character split across reads)
 
     def write(data: bytes) -> None:

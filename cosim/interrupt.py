@@ -55,11 +55,18 @@ def _handler(signum: int, frame: FrameType | None) -> None:
     raise Interrupted(signum)
 
 
+def _elsewhere() -> bool:
+    """Whether this is not the main thread: a run there installs no handlers (Python runs them in the main thread
+    only), so its blocks and its end must not touch the main thread's run (a run ending in a worker thread turned
+    Ctrl-C off for the main thread's: an API probe)."""
+    return threading.current_thread() is not threading.main_thread()
+
+
 @contextmanager
 def handling(signals: tuple[int, ...] = SIGNALS) -> Iterator[None]:
     """Install the handlers for the duration of the block and restore the old ones. Outside the main
     thread (where Python runs signal handlers) it does nothing."""
-    if threading.current_thread() is not threading.main_thread():
+    if _elsewhere():
         yield
         return
     # a signal ignored when we started stays ignored: `nohup cosim run ...` must survive the hangup
@@ -74,13 +81,6 @@ def handling(signals: tuple[int, ...] = SIGNALS) -> Iterator[None]:
         for s, h in old.items():
             signal.signal(s, h)
         _State.active = False
-
-
-def _elsewhere() -> bool:
-    """Whether this is not the main thread: a run there installs no handlers (Python runs them in the main thread
-    only), so its blocks and its end must not touch the main thread's run (a run ending in a worker thread turned
-    Ctrl-C off for the main thread's: an API probe)."""
-    return threading.current_thread() is not threading.main_thread()
 
 
 @contextmanager

@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from cosim.runtime import Runtime
+from cosim.runtime import Runtime, output_bits
 from cosim.subsim import Subsim
 
 
@@ -60,8 +60,7 @@ def check_pure(
 
 
 def _frozen(outputs: Mapping[str, Any], end_state: Any) -> tuple:
-    return (tuple(sorted((k, np.asarray(v, dtype=np.float64).tobytes()) for k, v in outputs.items())),
-            np.asarray(end_state, dtype=np.float64).tobytes())
+    return output_bits(outputs), np.asarray(end_state, dtype=np.float64).tobytes()
 
 
 def _copies(attrs: Mapping[str, Any], caches: set[str]) -> dict[str, Any]:

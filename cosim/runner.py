@@ -547,31 +547,38 @@ def held_inputs(scenario: Scenario, descriptions: dict[str, Description]) -> dic
                 raise ScenarioError(f"{scenario.path}: [subsims.{name}.inputs] input {name}.{port} ({p.size} x "
                                     f"{p.unit or 'unitless'}) is fed by no coupling: couple it ([[couplings]] to = "
                                     f"\"{name}.{port}\") or hold it constant ({port} = {[0.0] * p.size})")
-        for port, values in given.items():
-            p, ref = d.inputs.get(port), f"{name}.{port}"
-            why = ("is no input" if p is None else "is fed by a coupling" if ref in coupled
-                   else f"takes {p.size} value{'s' if p.size != 1 else ''}, got {len(values)}"
-                   if len(values) != p.size else "")
-            if why:
-                raise ScenarioError(f"{scenario.path}: [subsims.{name}.inputs.{port}] {ref} {why} "
-                                    f"(inputs: {', '.join(d.inputs) or 'none'})")
-            held[ref] = values
+        held.update(_input_values(scenario, name, d, "inputs", coupled))
     return held
+
+
+def _input_values(scenario: Scenario, name: str, d: Description, table: str, coupled: set[str]
+                  ) -> dict[str, tuple[float, ...]]:
+    """The values of [subsims.<name>.<table>] by "subsim.port", each checked against the described inputs:
+    ``inputs`` holds those no coupling feeds, ``guess`` gives those a coupling feeds a start."""
+    found = {}
+    for port, values in getattr(scenario.subsims[name], table).items():
+        p, ref = d.inputs.get(port), f"{name}.{port}"
+        if p is None:
+            why = "is no input"
+        elif table == "inputs" and ref in coupled:
+            why = "is fed by a coupling"
+        elif table == "guess" and ref not in coupled:
+            why = f"is fed by no coupling (a constant goes in [subsims.{name}.inputs])"
+        elif len(values) != p.size:
+            why = f"takes {p.size} value{'s' if p.size != 1 else ''}, got {len(values)}"
+        else:
+            found[ref] = values
+            continue
+        raise ScenarioError(f"{scenario.path}: [subsims.{name}.{table}.{port}] {ref} {why} "
+                            f"(inputs: {', '.join(d.inputs) or 'none'})")
+    return found
 
 
 def guessed_inputs(scenario: Scenario, descriptions: dict[str, Description]) -> dict[str, tuple[float, ...]]:
     """The values of [subsims.<name>.guess]: each names a coupled input, with one value per channel."""
     coupled, guessed = {str(c.target) for c in scenario.couplings}, {}
     for name, d in descriptions.items():
-        for port, values in scenario.subsims[name].guess.items():
-            p, ref = d.inputs.get(port), f"{name}.{port}"
-            why = ("is no input" if p is None else "is fed by no coupling (a constant goes in [subsims."
-                   f"{name}.inputs])" if ref not in coupled else f"takes {p.size} value{'s' if p.size != 1 else ''}, "
-                   f"got {len(values)}" if len(values) != p.size else "")
-            if why:
-                raise ScenarioError(f"{scenario.path}: [subsims.{name}.guess.{port}] {ref} {why} "
-                                    f"(inputs: {', '.join(d.inputs) or 'none'})")
-            guessed[ref] = values
+        guessed.update(_input_values(scenario, name, d, "guess", coupled))
     return guessed
 
 
