@@ -32,6 +32,17 @@ def check_scheme(scheme: str, samples: int) -> None:
 
 Interpolant = Callable[[float | np.ndarray], np.ndarray]  # t -> (m,); times (k,) -> (k, m)
 
+FEW_FLOATS = 16  # a vector of up to this many is looked at on Python floats (a NumPy call costs ~1 us)
+_ALL = np.logical_and.reduce
+
+
+def all_finite(a: np.ndarray) -> bool:
+    """Whether an array of real numbers holds no NaN or inf: ``np.isfinite(a).all()``, in one reduction without
+    ``all()``'s Python wrapper, and for a short vector on Python floats (every request checks a few)."""
+    if a.ndim == 1 and a.size <= FEW_FLOATS:
+        return all(map(math.isfinite, a.tolist()))
+    return bool(_ALL(np.isfinite(a), axis=None))
+
 
 class SegmentError(ValueError):
     """A segment was built from inconsistent data."""
@@ -78,7 +89,7 @@ class Segment:
             v = v.reshape(-1, 1)
         if v.ndim != 2 or v.shape[0] != t.size:
             raise SegmentError(f"values must have shape ({t.size}, m) to match {t.size} times, got {v.shape}")
-        if not np.isfinite(v).all():
+        if not all_finite(v):
             i, j = np.argwhere(~np.isfinite(v))[0]
             raise SegmentError(f"values[{i}, {j}] is {float(v[i, j])!r}: samples must be finite")
         m = v.shape[1]
@@ -152,17 +163,27 @@ class _Weights(NamedTuple):
     den: np.ndarray | None  # (k, 1); None when the weights sum to one by construction (linear)
     exact_rows: np.ndarray
     exact_nodes: np.ndarray
+    # kept weights: by channel count m, coef (terms, k, m) and den (k, m), repeated over the channels (on arrays
+    # this small, a product broadcast over the last axis costs twice a plain one); None: not kept, not repeated
+    wide: dict[int, tuple[np.ndarray, np.ndarray | None]] | None = None
 
 
 def _apply(weights: _Weights, values: np.ndarray) -> np.ndarray:
+    coef, den = weights.coef, weights.den
+    if weights.wide is not None:
+        m = values.shape[1]
+        wide = weights.wide.get(m)
+        if wide is None:  # (two threads may both make them: equal arrays, either is right)
+            wide = weights.wide[m] = (np.repeat(coef, m, axis=2), None if den is None else np.repeat(den, m, axis=1))
+        coef, den = wide
     # (terms, k, m), each product as the scalar forms compute it; take() gathers the same rows as values[nodes]
     # in a third of the time
-    terms = weights.coef * values.take(weights.nodes, axis=0)
+    terms = coef * values.take(weights.nodes, axis=0)
     out = terms[0] + terms[1] if len(terms) > 1 else terms[0]  # (a view of the fresh ``terms``: ours to change)
     for term in terms[2:]:
         out += term
-    if weights.den is not None:
-        out /= weights.den
+    if den is not None:
+        out /= den
     if weights.exact_rows.size:
         out[weights.exact_rows] = values.take(weights.exact_nodes, axis=0)
     return out
@@ -182,7 +203,7 @@ def _weights(scheme: str, times: np.ndarray, ts: np.ndarray, compute: Callable[[
     key = b"".join((scheme.encode(), times.size.to_bytes(4, "little"), times.tobytes(), ts.tobytes()))
     found = _KEPT_WEIGHTS.get(key)
     if found is None:
-        found = compute(times, ts)
+        found = compute(times, ts)._replace(wide={})
         if len(_KEPT_WEIGHTS) >= KEPT_WEIGHTS_MAX:
             _KEPT_WEIGHTS.clear()  # (one call: safe against another thread's insert; old grids are not reused)
         _KEPT_WEIGHTS[key] = found

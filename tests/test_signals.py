@@ -356,6 +356,33 @@ def test_interpolants_on_one_grid_share_weights_never_values(scheme: str) -> Non
     assert not np.allclose(second, other)  # the moved sample matters: a key without the grid would miss it
 
 
+@pytest.mark.parametrize("scheme", list(SCHEMES))
+def test_kept_weights_serve_values_of_any_width(scheme: str) -> None:
+    """Kept weights keep their coefficients repeated per channel count: values of another width on the same grid
+    and times get their own, bit for bit what the scalar form gives."""
+    grid = np.linspace(3.0, 3.4, 6)
+    ts = np.sort(np.concatenate([grid, 0.5 * (grid[1:] + grid[:-1])]))  # RK-like times, samples among them
+    rng = np.random.default_rng(3)
+    signals._KEPT_WEIGHTS.clear()
+    for m in (3, 1, 6, 3):
+        v = rng.normal(size=(grid.size, m))
+        got = interpolant(grid, v, scheme)(ts)
+        assert got.tobytes() == np.array([interpolant(grid, v, scheme)(float(t)) for t in ts]).tobytes()
+    (kept,) = signals._KEPT_WEIGHTS.values()
+    assert sorted(kept.wide) == [1, 3, 6]
+
+
+@pytest.mark.parametrize("shape", [(0,), (1,), (6,), (16,), (17,), (200,), (5, 3), (1, 1)])
+@pytest.mark.parametrize("bad", [None, np.nan, np.inf, -np.inf])
+def test_all_finite_says_what_numpy_says(shape: tuple[int, ...], bad: float | None) -> None:
+    """On Python floats for a short vector, in one reduction for the rest: NumPy's answer either way."""
+    for where in range(max(math.prod(shape), 1) if bad is not None else 1):
+        a = (1.7e308 * np.linspace(-1.0, 1.0, math.prod(shape))).reshape(shape)  # (a sum would overflow)
+        if bad is not None and a.size:
+            a.reshape(-1)[where] = bad
+        assert signals.all_finite(a) is bool(np.isfinite(a).all())
+
+
 def test_the_kept_weights_stay_bounded() -> None:
     grid = np.linspace(0.0, 0.4, 5)
     ts = np.linspace(0.0, 0.4, 9)
