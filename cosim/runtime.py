@@ -9,6 +9,7 @@ from __future__ import annotations
 import copy
 import functools
 import hashlib
+import itertools
 import math
 import os
 import re
@@ -22,10 +23,11 @@ import numpy as np
 
 from cosim.contract import PROTOCOL_VERSION, CosimError
 from cosim.importing import code_digests, own_frame
-from cosim.signals import SegmentError, check_scheme, check_time_grid, interpolant
+from cosim.signals import SegmentError, all_finite, check_scheme, check_time_grid, interpolant
 from cosim.subsim import IntervalTooLong, ModelError, Port, Subsim, as_ports, resolve_params
 
 DEFAULT_HISTORY = 32
+_FLOAT64 = np.dtype(np.float64)
 
 
 class _Trial(NamedTuple):  # one per run_interval: a tuple costs a fraction of a frozen dataclass
@@ -236,6 +238,19 @@ def _readonly(a: np.ndarray) -> np.ndarray:
     return a
 
 
+class _InputLayout(NamedTuple):
+    """Which columns of the one array a request's input samples are joined into hold each input (made once per
+    configure, not per request)."""
+
+    ports: Mapping[str, Port] | None  # the input ports it was made for
+    slices: tuple[tuple[str, slice], ...]
+
+    @classmethod
+    def of(cls, ports: Mapping[str, Port]) -> _InputLayout:
+        ends = itertools.accumulate(p.size for p in ports.values())
+        return cls(ports, tuple((k, slice(end - p.size, end)) for (k, p), end in zip(ports.items(), ends)))
+
+
 def _port_map(ports: Mapping[str, Port]) -> dict[str, dict]:
     return {k: {"size": p.size, "unit": p.unit, "doc": p.doc} for k, p in ports.items()}
 
@@ -295,6 +310,9 @@ class Runtime:
         self._looked = 0.0  # when the latest look ended (perf_counter)
         self._watched_until: float | None = None  # the end of the latest run whose attributes were compared
         self._rerun_checked = True  # whether a run since the configure was repeated and gave the same bits
+        self._input_layout = _InputLayout(None, ())
+        self._grid: tuple[np.ndarray, float, float] | None = None  # the latest request's checked times, first, last
+        self._grid_bytes: bytes | None = None  # ...and the bytes they were checked from
         # told of every error the model caused (model_error, model_exception), e.g. to show it to the model's
         # owner at the subsim's own terminal as well as in the coordinator's reply
         self.on_model_error: Callable[[str, CosimError], None] | None = None
@@ -398,16 +416,9 @@ class Runtime:
         if commit:
             trial = self._committable_trial()
             state, t0 = trial.end_state, trial.end_time
-        try:
-            times = check_time_grid(t, "t")
-        except SegmentError as exc:
-            raise CosimError("bad_value", str(exc)) from None
-        if times.size < 2:
-            raise CosimError("bad_value", f"t must hold at least 2 sample times, got {times.size}")
-        if times.flags.writeable:  # the caller's own array (in one process): advance() sees what it would remotely
-            times = _readonly(times)
-        if times[0] != t0 or (t0 == 0.0 and math.copysign(1.0, times[0]) != math.copysign(1.0, t0)):  # -0.0 != 0.0
-            start, what = float(times[0]), "the trial to commit ends" if commit else "the committed time is"
+        times, start, end = self._time_grid(t)
+        if start != t0 or (t0 == 0.0 and math.copysign(1.0, start) != math.copysign(1.0, t0)):  # -0.0 != 0.0
+            what = "the trial to commit ends" if commit else "the committed time is"
             raise CosimError("time_mismatch", f"interval starts at t={start!r} but {what} {t0!r}")
         try:
             check_scheme(interp, times.size)
@@ -431,9 +442,24 @@ class Runtime:
             self._check_rerun(state, times, u, checked, took)
         if trial is not None:
             self._commit(trial)
-        end = float(times[-1])
         self.trial = _Trial(self.epoch, end, end_state)
         return {"t": times, "outputs": checked, "end_time": end}
+
+    def _time_grid(self, t: Any) -> tuple[np.ndarray, float, float]:
+        """``t`` checked as an interval's sample times, read-only (advance() sees what it would remotely), and its
+        first and last time. Every stage of an interval runs on one grid: the same times as the previous request's
+        give its checked copy again (checked and copied once per interval, not once per stage)."""
+        if type(t) is np.ndarray and t.dtype is _FLOAT64 and t.ndim == 1 and t.tobytes() == self._grid_bytes:
+            return self._grid
+        try:
+            times = check_time_grid(t, "t")
+        except SegmentError as exc:
+            raise CosimError("bad_value", str(exc)) from None
+        if times.size < 2:
+            raise CosimError("bad_value", f"t must hold at least 2 sample times, got {times.size}")
+        times = _readonly(times)  # (a copy of its own even of a read-only array: kept for the next requests)
+        self._grid, self._grid_bytes = (times, float(times[0]), float(times[-1])), times.tobytes()
+        return self._grid
 
     def _advance(self, state: np.ndarray, times: np.ndarray, u: Callable) -> Any:
         try:
@@ -562,8 +588,9 @@ class Runtime:
         return model
 
     def _set_committed(self, time: float, state: np.ndarray) -> None:
-        """Replace the committed state. A trial run before this is now stale (never committed)."""
-        self.time, self.state = float(time), _readonly(state)
+        """Replace the committed state by ``state``, a read-only copy of the runtime's own (as
+        :meth:`_check_state` returns: kept as it is). A trial run before this is now stale (never committed)."""
+        self.time, self.state = float(time), state
         self.epoch += 1
 
     def _require_configured(self) -> tuple[np.ndarray, float]:
@@ -577,7 +604,7 @@ class Runtime:
             f = float(x)
         except (TypeError, ValueError):
             raise CosimError("bad_value", f"{what} must be a number, got {x!r}") from None
-        if not np.isfinite(f):
+        if not math.isfinite(f):
             raise CosimError("bad_value", f"{what} must be finite, got {f!r}")
         return f
 
@@ -603,7 +630,7 @@ class Runtime:
         if s.ndim != 1 or (size is not None and s.size != size):
             want = f"({size},)" if size is not None else "1-D"
             raise refused(f"must have shape {want}, got {s.shape}")
-        if not np.isfinite(s).all():
+        if not all_finite(s):
             raise refused("contains NaN or inf")
         return _readonly(s)
 
@@ -616,27 +643,28 @@ class Runtime:
             self._wrong_input_names(inputs)
         if not self.inputs:
             return lambda t: _Inputs()
-        columns, slices, start = [], {}, 0
+        columns = []
         for name, port in self.inputs.items():
             v = inputs[name]
-            if type(v) is not np.ndarray or v.dtype != np.float64:
+            if type(v) is not np.ndarray or v.dtype is not _FLOAT64:
                 v = float_samples(name, v)
             if v.shape != (times.size, port.size):
                 raise CosimError(
                     "bad_value", f"inputs.{name}: expected shape ({times.size}, {port.size}), got {v.shape}"
                 )
             columns.append(v)
-            slices[name] = slice(start, start + port.size)
-            start += port.size
         values = columns[0] if len(columns) == 1 else np.concatenate(columns, axis=1)
-        if not np.isfinite(values).all():  # one check for all inputs; name the first bad one
-            bad = next(n for n, c in zip(self.inputs, columns) if not np.isfinite(c).all())
+        if not all_finite(values):  # one check for all inputs; name the first bad one
+            bad = next(n for n, c in zip(self.inputs, columns) if not all_finite(c))
             raise CosimError("bad_value", f"inputs.{bad}: contains NaN or inf")
         at = interpolant(times, values, interp)  # times and values checked above
-        if len(slices) == 1:
-            (only,) = slices
+        if len(columns) == 1:
+            (only,) = self.inputs
             return lambda t: _Inputs({only: at(t)})
-        items = tuple(slices.items())
+        layout = self._input_layout
+        if layout.ports is not self.inputs:  # (the ports configure made: a new dict each time)
+            layout = self._input_layout = _InputLayout.of(self.inputs)
+        items = layout.slices
         return lambda t: (lambda x: _Inputs({k: x[..., s] for k, s in items}))(at(t))
 
     def _wrong_input_names(self, inputs: Mapping[str, Any]) -> None:
@@ -680,9 +708,9 @@ class Runtime:
                 raise CosimError("model_error", f"advance() output {name!r} has shape {v.shape}, expected {want}")
             checked[name] = v
         together = np.concatenate(list(checked.values()), axis=1) if len(checked) > 1 else None
-        if together is None or not np.isfinite(together).all():  # one check for all; then name the bad one
+        if together is None or not all_finite(together):  # one check for all; then name the bad one
             for name, v in checked.items():
-                if not np.isfinite(v).all():
+                if not all_finite(v):
                     i = int(np.argwhere(~np.isfinite(v))[0][0])
                     raise CosimError("model_error", f"output {name!r} is not finite at t = {float(times[i])!r}")
         return checked

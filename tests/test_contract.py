@@ -7,6 +7,7 @@ import pytest
 
 from cosim.contract import SubsimError
 from cosim.handles import InProcessHandle, SubsimHandle
+from cosim.subsim import Port, Subsim
 from subsims.integrator.subsim import Integrator
 
 N = 5
@@ -270,6 +271,52 @@ def test_advance_in_one_process_gets_times_it_cannot_change_as_over_zenoh() -> N
         h.run_interval(t, ramp(t))
     assert err.value.code == "model_exception" and "read-only" in err.value.message
     assert t.tobytes() == TIMES.tobytes()
+
+
+def test_times_rewritten_in_place_between_requests_are_checked_and_run_on_anew() -> None:
+    """The runtime keeps the latest request's checked times for the next stage's (the same grid): the caller's
+    array rewritten in place, or the same bytes in another shape, are checked anew, not served from what it kept."""
+    seen = []
+
+    class Recording(Integrator):
+        def advance(self, state, times, u):
+            seen.append(times.tobytes())
+            return super().advance(state, times, u)
+
+    h = InProcessHandle(Recording(), name="recording")
+    h.configure({"size": 2})
+    t = TIMES.copy()
+    h.run_interval(t, ramp(t))
+    t[1:] = [0.05, 0.1, 0.3, 0.5]  # another grid from the same start, in the same array
+    got = h.run_interval(t, ramp(t))
+    assert got.t.tobytes() == seen[-1] == t.tobytes() and got.end_time == 0.5
+    with pytest.raises(SubsimError) as err:  # the bytes of the grid kept
+        h.run_interval(t.reshape(-1, 1), ramp(t))
+    assert (err.value.code, err.value.message) == ("bad_value", "t must be a non-empty 1-D array, got shape (5, 1)")
+    t[2] = t[1]
+    with pytest.raises(SubsimError) as err:
+        h.run_interval(t, ramp(t))
+    assert (err.value.code, err.value.message) == ("bad_value", "t must be strictly increasing: t[1]=0.05 >= t[2]=0.05")
+
+
+def test_inputs_are_taken_by_the_ports_of_the_latest_configure() -> None:
+    """Where each input goes among the joined samples is worked out once per configure: ports that depend on the
+    parameters follow a new configure."""
+    class Sized(Subsim):
+        def initial_state(self, params):
+            self.inputs = {"a": Port(params["k"]), "b": Port(1)}
+            self.outputs = {"y": Port(params["k"] + 1)}
+            return np.zeros(0)
+
+        def advance(self, state, times, u):
+            x = u(times)
+            return {"y": np.column_stack([x["a"], x["b"]])}, state
+
+    h = InProcessHandle(Sized(), name="sized")
+    for k in (1, 3, 2):
+        h.configure({"k": k})
+        a, b = np.arange(N * k, dtype=float).reshape(N, k), -np.arange(N, dtype=float).reshape(N, 1)
+        assert h.run_interval(TIMES, {"a": a, "b": b}).outputs["y"].tobytes() == np.hstack([a, b]).tobytes()
 
 
 def test_samples_given_as_lists_run_the_same_in_one_process_and_remotely(handle: SubsimHandle) -> None:
