@@ -621,12 +621,15 @@ class Runtime:
 
         if state is None:  # (it read "must have shape 1-D, got ()", blaming the parameters: a newcomer probe)
             raise refused("is None: a state is a 1-D array of floats (return it)")
-        if getattr(getattr(state, "dtype", None), "kind", None) == "c":  # (a cast would drop the imaginary part)
+        if type(state) is np.ndarray and state.dtype is _FLOAT64:  # (the common case, without a call)
+            s = state
+        elif getattr(getattr(state, "dtype", None), "kind", None) == "c":  # (a cast would drop the imaginary part)
             raise refused(f"is complex ({state.dtype}): a state is real numbers")
-        try:
-            s = np.asarray(state, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise refused("is not a float vector") from None
+        else:
+            try:
+                s = np.asarray(state, dtype=np.float64)
+            except (TypeError, ValueError):
+                raise refused("is not a float vector") from None
         if s.ndim != 1 or (size is not None and s.size != size):
             want = f"({size},)" if size is not None else "1-D"
             raise refused(f"must have shape {want}, got {s.shape}")
