@@ -235,8 +235,8 @@ class ResultWriter:
         self._resumed = True
 
     def rows(self, interval: Interval) -> np.ndarray:
-        parts = [interval.t[:, None]] + [interval.outputs[r.subsim][r.port] for r, _ in self.signals]
-        return np.hstack(parts)
+        outputs = interval.outputs
+        return np.concatenate([interval.t[:, None], *[outputs[r.subsim][r.port] for r, _ in self.signals]], axis=1)
 
     def holds(self, interval: Interval) -> bool:
         """Whether ``interval`` is the last one in the files (a signal held back while it was written is raised
@@ -273,14 +273,14 @@ class ResultWriter:
         with interrupt.deferred():  # a signal waits until the interval is written whole
             assert self._data is not None and self._diag is not None, "write after close"
             t = interval.t
-            line = [self._count + 1, repr(float(t[0])), repr(float(t[-1])), interval.stages,
-                    f"{interval.largest_residual:.6e}", f"{interval.wall_time:.6f}", interval.halvings,
-                    interval.restarts, repr(float(t[-1] - t[0])), f"{interval.error:.3e}"]
+            line = (f"{self._count + 1},{float(t[0])!r},{float(t[-1])!r},{interval.stages},"
+                    f"{interval.largest_residual:.6e},{interval.wall_time:.6f},{interval.halvings},"
+                    f"{interval.restarts},{float(t[-1] - t[0])!r},{interval.error:.3e}\n")
             size = self._data.size
             try:
                 self._data.append(data, self._ends_at)
                 try:
-                    self._diag.append((",".join(map(str, line)) + "\n").encode(), self._ends_at)
+                    self._diag.append(line.encode(), self._ends_at)
                 except OutputWriteError:  # the interval goes in whole or not at all: the two files end together
                     self._data.cut(size)
                     raise
