@@ -87,15 +87,16 @@ class Deadline:
         return self._current
 
     def observe(self, seconds: float) -> None:
-        self._recent.append(seconds)
-        if len(self._recent) > self.window:
-            self._recent.popleft()
-        self._seen += 1
+        recent = self._recent
+        recent.append(seconds)
+        if len(recent) > self.window:
+            recent.popleft()
+        self._seen = seen = self._seen + 1
         # re-derived at the end of the warm-up, then every 20 runs (not per request: the hot path stays cheap),
         # and at once when a run is slower than the spike allowance of the current deadline
-        if self._seen == self.warmup or (self._seen > self.warmup and (
-                self._seen % 20 == 0 or (self._current is not None and self.spike * seconds > self._current))):
-            ordered = sorted(self._recent)
+        if seen == self.warmup or (seen > self.warmup and (
+                seen % 20 == 0 or (self._current is not None and self.spike * seconds > self._current))):
+            ordered = sorted(recent)
             self._current = max(self.floor, self.typical * ordered[len(ordered) // 2], self.spike * ordered[-1])
 
 
@@ -322,8 +323,6 @@ class Coordinator:
 
     def _record_while_waiting(self, names: Sequence[str]) -> None:
         """Record in steps until every request to ``names`` has its reply (or nothing is left to record)."""
-        if self._recording is None and not self._unrecorded:  # the common case: no need to look at the replies
-            return
         handles = [self.handles[name] for name in names]
         while not all(h.replied() for h in handles) and self._record_step():
             pass
@@ -390,7 +389,8 @@ class Coordinator:
         """Start every run of the action, then wait for all (none is left in flight). A subsim that
         answered has committed its previous interval if asked to. Raises the first error after all answered,
         or :class:`_Replaced` when every failure was a subsim that died or hung and has been replaced."""
-        interp, uncommitted = self.settings.interp, self._uncommitted
+        interp, uncommitted, handles, sent_inputs = self.settings.interp, self._uncommitted, self.handles, self._sent
+        times, inputs = action.times, action.inputs
         deadline = self.deadline.seconds()
         pending: dict[str, Callable[[], IntervalResult]] = {}
         sent = time.perf_counter()
@@ -398,15 +398,16 @@ class Coordinator:
         # when the action ends starts at once and the others share what is left (remote case 2-auto, RF-C:
         # 10 % less wall time than in the plan's order). In process nothing is waited for: the plan's order.
         took = self._took
-        for name in sorted(action.inputs, key=lambda n: -took.get(n, 0.0)) if took else action.inputs:
-            handle, inputs = self.handles[name], action.inputs[name]
+        for name in sorted(inputs, key=lambda n: -took.get(n, 0.0)) if took else inputs:
+            handle = handles[name]
             handle.deadline = deadline
-            self._sent[name] = inputs
-            pending[name] = _send(handle.start_run_interval, action.times, inputs, interp, commit=name in uncommitted)
+            sent_inputs[name] = inputs[name]
+            pending[name] = _send(handle.start_run_interval, times, inputs[name], interp, name in uncommitted)
         recording: BaseException | None = None
         spare = len(pending) < CORES
         self._spare_seen = self._spare_seen or spare
-        if spare or not self._spare_seen:
+        # (with nothing to record, the common case, the replies need no looking at)
+        if (spare or not self._spare_seen) and (self._recording is not None or self._unrecorded):
             try:  # the last committed interval, while this run's requests are being served
                 if spare:  # in steps, looking at the replies between them: a reply waits one step at most
                     self._record_while_waiting(list(pending))
@@ -426,9 +427,10 @@ class Coordinator:
         took = time.perf_counter() - sent
         self.deadline.observe(took)
         self._round_trips.append(took)
-        self._slowest = max(self._slowest, took)
+        if took > self._slowest:
+            self._slowest = took
         uncommitted.difference_update(results)
-        return {name: results[name].outputs for name in action.inputs}
+        return {name: results[name].outputs for name in inputs}
 
     def _gather(self, pending: Mapping[str, Callable[[], object]], replace: bool = False,
                 sent: float | None = None) -> dict:
