@@ -705,23 +705,28 @@ def run_scenario(
 
         unsaved: list[float] = []  # the times of resume points that could not be saved
 
+        def save_points() -> None:
+            """Save the resume points taken whose intervals are all in the files now."""
+            with interrupt.deferred():  # a signal while a resume point is saved: raised once it is (it was lost)
+                while checkpoints and writer.t_last is not None and checkpoints[0].point.t <= writer.t_last:
+                    writer.sync()  # (a point saved, fsynced, before the rows it names are on disk: a power cut
+                    point = checkpoints.pop(0)  # would leave a point whose files the resume refuses)
+                    try:
+                        save_resume(resume_path(output), replace(point, written=writer.written(point.point.t),
+                                                                 models=models))
+                    except OutputWriteError as exc:  # the results still go on: only a later --resume loses
+                        if not unsaved:  # (a read-only directory stopped the run, results writable: a red team)
+                            why = str(exc).removesuffix(", then run again")  # (this run goes on)
+                            log(f"cosim: the resume point at t = {point.point.t:g} could not be saved ({why}); "
+                                "the run goes on, and an interrupted run goes on (--resume) from the last point "
+                                "saved, if any")
+                        unsaved.append(point.point.t)
+
         def each(interval: Interval) -> Iterator[None]:  # in steps: the coordinator writes while it waits
             try:
                 yield from writer.write_steps(interval)
-                with interrupt.deferred():  # a signal while a resume point is saved: raised once it is (it was lost)
-                    while checkpoints and writer.t_last is not None and checkpoints[0].point.t <= writer.t_last:
-                        writer.sync()  # (a point saved, fsynced, before the rows it names are on disk: a power cut
-                        point = checkpoints.pop(0)  # would leave a point whose files the resume refuses)
-                        try:
-                            save_resume(resume_path(output), replace(point, written=writer.written(point.point.t),
-                                                                     models=models))
-                        except OutputWriteError as exc:  # the results still go on: only a later --resume loses
-                            if not unsaved:  # (a read-only directory stopped the run, results writable: a red team)
-                                why = str(exc).removesuffix(", then run again")  # (this run goes on)
-                                log(f"cosim: the resume point at t = {point.point.t:g} could not be saved ({why}); "
-                                    "the run goes on, and an interrupted run goes on (--resume) from the last point "
-                                    "saved, if any")
-                            unsaved.append(point.point.t)
+                if checkpoints:  # (one every checkpoint_every intervals: most have none to save)
+                    save_points()
             except interrupt.Interrupted:  # a signal held back while the interval was written: it is in the files
                 if on_interval is not None and writer.holds(interval):
                     on_interval(interval)
