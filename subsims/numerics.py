@@ -16,6 +16,7 @@ than NumPy (the paper's 60,000 s runs make millions of derivative calls), for la
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
@@ -52,42 +53,63 @@ def rk4_times(times: np.ndarray, steps: int | np.ndarray = 1, h: float | None = 
     ends where the next starts, on t_{k+1} exactly for the last. Returns ``ts`` (2S + 1,) = start, midpoint,
     start, midpoint, ..., end of the last (S sub-steps in all) and ``hs`` (S,).
     """
-    t = np.asarray(times, dtype=np.float64)
-    total = (t.size - 1) * int(steps) if isinstance(steps, (int, np.integer)) else int(np.sum(steps))
-    if total > MAX_STEPS:  # one request must not hold its process for minutes (or ask for gigabytes of times)
-        raise PhysicsError(f"{total} RK4 steps asked for in one call ({t.size} samples); at most {MAX_STEPS}: "
-                           "fewer samples or steps per sample (idiv)")
-    if h is None and isinstance(steps, int) and steps == 1:  # the common case, in a few array operations
-        hs = t[1:] - t[:-1]
-        starts = t[:-1]
+    ts, hs, _ = _grid(times, steps, h)
+    return np.array(ts, dtype=np.float64), np.array(hs, dtype=np.float64)
+
+
+def _grid(times: Sequence[float] | np.ndarray, steps: int | np.ndarray,
+          h: float | None) -> tuple[list[float], list[float], list[int]]:
+    """:func:`rk4_times` as Python floats, and the sub-steps of each interval: what :func:`rk4` steps through.
+
+    Built in a Python loop: a coupled interval has a few samples, for which the dozen array operations of the NumPy
+    form cost several times the loop (and rk4 reads the floats back one by one). The same operations as that form:
+    interval length / its steps, start + j h (the sample t_k itself with one step and no ``h``), start + h / 2.
+    """
+    t = np.asarray(times, dtype=np.float64).tolist()
+    if isinstance(steps, (int, np.integer)):
+        counts = [int(steps)] * (len(t) - 1)
     else:
-        count = np.broadcast_to(np.asarray(steps, dtype=np.intp), (t.size - 1,))
-        interval = np.repeat(np.arange(t.size - 1), count)  # interval of each sub-step
-        j = np.arange(interval.size) - np.repeat(np.cumsum(count) - count, count)  # index inside its interval
-        hs = (t[1:] - t[:-1])[interval] / count[interval] if h is None else np.full(interval.size, float(h))
-        starts = t[interval] + j * hs
-    ts = np.empty(2 * hs.size + 1)
-    ts[0:-1:2] = starts
-    ts[1::2] = starts + hs / 2.0
-    ts[-1] = t[-1]  # (a sample time t_k + 0 h is t_k itself)
-    return ts, hs
-
-
-def _axpy_list(y: list[float], f: Sequence[float], c: float) -> list[float]:
-    return [a + b * c for a, b in zip(y, f)]
+        counts = np.broadcast_to(np.asarray(steps, dtype=np.intp), (len(t) - 1,)).tolist()
+    total = sum(counts)
+    if total > MAX_STEPS:  # one request must not hold its process for minutes (or ask for gigabytes of times)
+        raise PhysicsError(f"{total} RK4 steps asked for in one call ({len(t)} samples); at most {MAX_STEPS}: "
+                           "fewer samples or steps per sample (idiv)")
+    ts: list[float] = []
+    hs: list[float] = []
+    if h is None and isinstance(steps, int) and steps == 1:  # the common case: one sub-step per sample interval
+        for start, end in zip(t, t[1:]):
+            hk = end - start
+            ts += (start, start + hk / 2.0)
+            hs.append(hk)
+    else:
+        for k, count in enumerate(counts):
+            if count > 0:
+                hk = (t[k + 1] - t[k]) / count if h is None else float(h)
+                for j in range(count):
+                    start = t[k] + j * hk
+                    ts += (start, start + hk / 2.0)
+                    hs.append(hk)
+    ts.append(t[-1])  # (a sample time t_k + 0 h is t_k itself)
+    return ts, hs, counts
 
 
 def _axpy_array(y: np.ndarray, f: np.ndarray, c: float) -> np.ndarray:
     return y + f * c
 
 
-def _rksys_list(y: list[float], k1: Vec, k2: Vec, k3: Vec, k4: Vec, h3: float, h6: float) -> list[float]:
-    return [a + b * h6 + c * h3 + d * h3 + e * h6 for a, b, c, d, e in zip(y, k1, k2, k3, k4)]
-
-
 def _rksys_array(y: np.ndarray, k1: np.ndarray, k2: np.ndarray, k3: np.ndarray, k4: np.ndarray, h3: float,
                  h6: float) -> np.ndarray:
     return y + k1 * h6 + k2 * h3 + k3 * h3 + k4 * h6
+
+
+@functools.lru_cache(maxsize=32)
+def _list_steps(n: int) -> tuple[Callable[..., list[float]], Callable[..., list[float]]]:
+    """(y + f c, the RKSYS sum) for lists of ``n`` floats, written out element by element: for the 6 or 12 states
+    of the satellite models a comprehension over zip costs 2-3 times the plain expressions. Each element is the
+    expression of the array form, ``y + f * c`` and ``y + k1 * h6 + k2 * h3 + k3 * h3 + k4 * h6``."""
+    axpy = ", ".join(f"y[{i}] + f[{i}] * c" for i in range(n))
+    rksys = ", ".join(f"y[{i}] + k1[{i}] * h6 + k2[{i}] * h3 + k3[{i}] * h3 + k4[{i}] * h6" for i in range(n))
+    return eval(f"lambda y, f, c: [{axpy}]"), eval(f"lambda y, k1, k2, k3, k4, h3, h6: [{rksys}]")
 
 
 def rk4(f: Derivative, y0: State, times: Sequence[float] | np.ndarray, steps: int | np.ndarray = 1,
@@ -104,16 +126,13 @@ def rk4(f: Derivative, y0: State, times: Sequence[float] | np.ndarray, steps: in
     the states keep its kind. ``euler``: forward Euler steps instead (y + h f at the sub-step starts; for
     comparisons). Returns (states at the samples, the kept values, the state at ``times[-1]``).
     """
-    ts, hs = rk4_times(times, steps, h)
-    tl, hl = ts.tolist(), hs.tolist()
-    rows = inputs(ts) if inputs is not None else [None] * len(tl)
+    tl, hl, counts = _grid(times, steps, h)
+    rows = inputs(np.array(tl, dtype=np.float64)) if inputs is not None else [None] * len(tl)
     lists = isinstance(y0, list)
-    axpy, rksys = (_axpy_list, _rksys_list) if lists else (_axpy_array, _rksys_array)
+    axpy, rksys = _list_steps(len(y0)) if lists else (_axpy_array, _rksys_array)
     y = list(y0) if lists else np.array(y0, dtype=np.float64)
     k1, kept = node(tl[0], y, rows[0]) if node is not None else (f(tl[0], y, rows[0]),) * 2
     states, keeps = [y], [kept]
-    counts = np.broadcast_to(np.asarray(steps, dtype=np.intp), (len(times) - 1,)).tolist() if np.ndim(steps) else \
-        [int(steps)] * (len(times) - 1)
     i, last = 0, 2 * len(hl)
     for count in counts:
         for _ in range(count):
@@ -168,31 +187,36 @@ def input_rows(u: Callable[[np.ndarray], Any], ts: np.ndarray, ports: Mapping[st
 
 def vecnorm(x: Vec) -> tuple[tuple[float, float, float], float]:
     """VECNORM: (unit vector, magnitude); the zero vector gives ((0, 0, 0), 0) (guard needed by RF-C stage 0)."""
-    mag = math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2])
+    x0, x1, x2 = x
+    mag = math.sqrt(x0 * x0 + x1 * x1 + x2 * x2)
     if mag <= 0.0:
         return (0.0, 0.0, 0.0), 0.0
-    return (x[0] / mag, x[1] / mag, x[2] / mag), mag
+    return (x0 / mag, x1 / mag, x2 / mag), mag
 
 
 def cross3(a: Vec, b: Vec) -> tuple[Any, Any, Any]:
     """vcross: a x b by components; each component a float, or an array (then a whole column of vectors)."""
-    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+    a0, a1, a2 = a
+    b0, b1, b2 = b
+    return (a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0)
 
 
 def matvec(m: Mat, v: Vec) -> tuple[float, float, float]:
     """MATVEC: m v for a 3x3 matrix given as rows."""
-    r0, r1, r2 = m
-    return (r0[0] * v[0] + r0[1] * v[1] + r0[2] * v[2],
-            r1[0] * v[0] + r1[1] * v[1] + r1[2] * v[2],
-            r2[0] * v[0] + r2[1] * v[1] + r2[2] * v[2])
+    (m00, m01, m02), (m10, m11, m12), (m20, m21, m22) = m
+    v0, v1, v2 = v
+    return (m00 * v0 + m01 * v1 + m02 * v2,
+            m10 * v0 + m11 * v1 + m12 * v2,
+            m20 * v0 + m21 * v1 + m22 * v2)
 
 
 def matTvec(m: Mat, v: Vec) -> tuple[float, float, float]:  # noqa: N802 - m^T v
     """TRAN3 then MATVEC: m^T v."""
-    r0, r1, r2 = m
-    return (r0[0] * v[0] + r1[0] * v[1] + r2[0] * v[2],
-            r0[1] * v[0] + r1[1] * v[1] + r2[1] * v[2],
-            r0[2] * v[0] + r1[2] * v[1] + r2[2] * v[2])
+    (m00, m01, m02), (m10, m11, m12), (m20, m21, m22) = m
+    v0, v1, v2 = v
+    return (m00 * v0 + m10 * v1 + m20 * v2,
+            m01 * v0 + m11 * v1 + m21 * v2,
+            m02 * v0 + m12 * v1 + m22 * v2)
 
 
 # --- 3-vectors as NumPy arrays ------------------------------------------------------------------------------
