@@ -77,17 +77,21 @@ def _grid(times: Sequence[float] | np.ndarray, steps: int | np.ndarray,
     ts: list[float] = []
     hs: list[float] = []
     if h is None and isinstance(steps, int) and steps == 1:  # the common case: one sub-step per sample interval
-        for start, end in zip(t, t[1:]):
+        start = t[0]
+        for end in t[1:]:
             hk = end - start
-            ts += (start, start + hk / 2.0)
+            ts.append(start)
+            ts.append(start + hk / 2.0)
             hs.append(hk)
+            start = end
     else:
         for k, count in enumerate(counts):
             if count > 0:
                 hk = (t[k + 1] - t[k]) / count if h is None else float(h)
                 for j in range(count):
                     start = t[k] + j * hk
-                    ts += (start, start + hk / 2.0)
+                    ts.append(start)
+                    ts.append(start + hk / 2.0)
                     hs.append(hk)
     ts.append(t[-1])  # (a sample time t_k + 0 h is t_k itself)
     return ts, hs, counts
