@@ -269,9 +269,18 @@ def dcm321(phi: Vec) -> tuple[tuple[float, float, float], ...]:
                        (math.cos(phi[0]), math.cos(phi[1]), math.cos(phi[2])))
 
 
+DCM_ARRAYS_FROM = 12  # rows from which eq. 15 on columns beats a loop over the rows (5 rows: 10 against 19 us)
+
+
 def dcm321_batch(phi: np.ndarray) -> np.ndarray:
-    """Eq. 15 vectorised: phi (n, 3) -> A (n, 3, 3)."""
+    """Eq. 15 vectorised: phi (n, 3) -> A (n, 3, 3).
+
+    The sines and cosines by NumPy, then the products on whole columns or, for the few rows of a coupled interval,
+    on the rows' floats: the same operations on the same values, so the same bits either way."""
     phi = np.asarray(phi, dtype=np.float64).reshape(-1, 3)
+    if phi.shape[0] < DCM_ARRAYS_FROM:
+        rows = [rotation321(s, c) for s, c in zip(np.sin(phi).tolist(), np.cos(phi).tolist())]
+        return np.array(rows, dtype=np.float64).reshape(-1, 3, 3)
     a = np.empty((phi.shape[0], 3, 3))
     for i, row in enumerate(rotation321(np.sin(phi).T, np.cos(phi).T)):
         for j, column in enumerate(row):

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from subsims.aero.model import torque_about_cm
-from subsims.numerics import dcm321_batch
+from subsims.numerics import DCM_ARRAYS_FROM, dcm321_batch, rotation321
 from subsims.satellite.transforms import body_to_inertial, inertial_to_body, torque_to_cm
 
 EDGES = np.array([0.0, -0.0, 1.0, -1.0, 5e-324, -5e-324, 2.2250738585072014e-308, 1e-300, 1e300, -1e300,
@@ -88,3 +88,19 @@ def test_frame_transforms_bits(n: int) -> None:
                 _same_bits(transform(v, phi.copy()), expected)  # the remembered DCM
                 _same_bits(transform(v.tolist(), phi.tolist()), expected)
                 _same_bits(transform(v[0], phi[0]), expected[:1])
+
+
+@pytest.mark.parametrize("n", [0, 1, 5, DCM_ARRAYS_FROM - 1, DCM_ARRAYS_FROM, 65])
+def test_dcm321_batch_bits(n: int) -> None:
+    """Both forms of dcm321_batch (rows' floats below DCM_ARRAYS_FROM rows, columns from it) give the bits of the
+    formula on each row's NumPy sines and cosines, and of the columns form on the same rows."""
+    for seed in range(5):
+        phi, _ = _inputs(max(n, 1), seed)
+        phi = phi[:n]
+        with np.errstate(invalid="ignore", over="ignore"):
+            got = dcm321_batch(phi)
+            assert got.shape == (n, 3, 3)
+            rows = [np.array(rotation321(s, c)) for s, c in zip(np.sin(phi).tolist(), np.cos(phi).tolist())]
+            _same_bits(got.reshape(-1, 9), np.array(rows).reshape(-1, 9))
+            padded = np.vstack([phi, np.zeros((DCM_ARRAYS_FROM, 3))])  # the same rows, by columns
+            _same_bits(got.reshape(-1, 9), dcm321_batch(padded)[:n].reshape(-1, 9))
