@@ -16,7 +16,7 @@ from cosim.coupler.convergence import Tolerance
 from cosim.coupler.couplings import Coupling
 from cosim.coupler.interval_control import IntervalControl
 from cosim.coupler.plan import Plan
-from cosim.coupler.relaxation import Commit, Done, NotConverged, Relaxation, Rollback, Run, Settings
+from cosim.coupler.relaxation import STALL_WINDOW, Commit, Done, NotConverged, Relaxation, Rollback, Run, Settings
 from cosim.results import read_results
 from cosim.runner import run_scenario
 from cosim.scenario import KEYS, ScenarioError, load, parse
@@ -468,3 +468,44 @@ def test_at_interval_min_a_try_is_never_given_up_before_max_stages() -> None:
     pinned = Settings(**base, auto=IntervalControl(initial=1.0, minimum=1.0, maximum=1.0, tol=1.0))
     auto = [a for a in drive(Relaxation(feedback_loop(-15.0), pinned).run(0.0, 1.0), answer) if isinstance(a, Commit)]
     assert fixed[0].interval.stages == auto[0].interval.stages > 20
+
+
+# --- a stalled iteration: a saturation bouncing between its limits -------------------------------------------------
+
+
+def _saturated(action: Run) -> dict:
+    """y' = -clip(u, -1, 1), y(0) = 0.1, integrated by trapezoids; fed back as u = 100 y. Over 1 s the Picard iterates
+    bounce between the limits: at 1 s to 0.25 s as an exact cycle (bit-equal stages, caught as one), at 0.125 s not
+    bit-equal, the residuals neither growing nor falling; at 0.0625 s they converge."""
+    t, u = action.times, np.clip(action.inputs["y"]["u"][:, 0], -1.0, 1.0)
+    integral = np.concatenate([[0.0], np.cumsum(np.diff(t) * (u[1:] + u[:-1]) / 2)])
+    return {"y": {"y": (0.1 - integral)[:, None]}}  # (the first interval's start)
+
+
+def test_a_stalled_try_is_given_up_after_a_few_windows_not_max_stages() -> None:
+    """A saturation bouncing between its limits is never bit-equal (no cycle) and never grows (not diverging): the try
+    used to run all max_stages (here 100) before it was retried shorter, at every length down to where it converges."""
+    settings = Settings(method="centralized", interval=1.0, samples=9, first_guess="hold", interp="linear",
+                        tol=Tolerance(1e-10, 1e-12), max_stages=100,
+                        auto=IntervalControl(initial=1.0, minimum=1e-4, maximum=1.0, tol=1.0))
+    tries, done = _tries(Relaxation(feedback_loop(100.0), settings).run(0.0, 1.0), _saturated, 1)
+    rejected = [stages for _, stages, accepted in tries if not accepted]
+    assert rejected and done[0].length < 1.0, tries  # rejected at 1 s, accepted shorter
+    assert max(rejected) <= 6 * STALL_WINDOW, tries  # four windows and a few (100 at 0.125 s without the test)
+
+
+@pytest.mark.parametrize(("residuals", "stalled"), [
+    ([1.0, 0.9] * 8, True),  # bouncing between two waveforms
+    ([1.0] * 15, False),  # too few stages to tell
+    ([0.0, 1.0] * 8, True),  # a Jacobi pair bouncing: each signal moves every other stage
+    ([0.95 ** k for k in range(16)], True),  # at 0.95 a stage it would take 400 stages to fall by 1e-9
+    ([0.9 ** k for k in range(16)], False),  # at 0.9 a stage: falling
+    ([0.8 ** k for k in range(40)], False),  # converging at 0.8 a stage
+    ([1.5 ** k for k in range(16)], False),  # growing (the divergence test's)
+])
+def test_a_try_is_given_up_as_stalled_only_when_four_windows_neither_fall_nor_grow(
+        residuals: list[float], stalled: bool) -> None:
+    from cosim.coupler.relaxation import _stalled
+
+    assert _stalled({"s": residuals}, ["s"]) is stalled
+    assert _stalled({"s": residuals}, []) is False  # a signal that passes is never the reason

@@ -363,6 +363,31 @@ def _diverging(history: Mapping[str, list[float]], failing: Sequence[str]) -> bo
     return False
 
 
+STALL_WINDOW = 4  # stages a window; interval = "auto": four windows in a row neither falling nor growing give up
+
+
+def _stalled(history: Mapping[str, list[float]], failing: Sequence[str]) -> bool:
+    """Whether a failing signal's residuals have neither fallen nor grown over the last four windows of
+    ``STALL_WINDOW`` stages (each one's maximum within 0.7-1.2 times the one before, as :func:`_trend`): an iteration
+    bouncing between the limits of a saturation, or around a switch, never bit-equal, that more stages would not
+    settle (it ran every one of ``max_stages`` before the try was retried shorter). An iteration converging at less
+    than about 0.91 a stage falls faster than that; a slower one would not reach its tolerance in ``max_stages``."""
+    w = STALL_WINDOW
+    for name in failing:
+        r = history.get(name, ())
+        if len(r) < 4 * w:
+            continue
+        m = [max(r[len(r) - (j + 1) * w:len(r) - j * w]) for j in range(4)]  # latest window first
+        if all(0.7 * m[j + 1] <= m[j] <= 1.2 * m[j + 1] for j in range(3)):
+            return True
+    return False
+
+
+def _hopeless(history: Mapping[str, list[float]], failing: Sequence[str]) -> bool:
+    """Whether more stages of this try would not converge: it diverges, or it has stalled."""
+    return _diverging(history, failing) or _stalled(history, failing)
+
+
 class RetryInterval(Exception):
     """Thrown into a running stream by a driver that replaced a subsim: every subsim is back at the
     interval's start (committed state), and the interval runs again from stage 0."""
@@ -500,7 +525,7 @@ class Relaxation:
         self._magnitudes: dict[str, np.ndarray] = {}  # interval = "auto": largest |input| per channel so far
         self._next_length: float | None = None  # interval = "auto": the length of the interval after the last one
         self._ceiling: tuple[float, int] = (math.inf, 0)  # interval = "auto": (ceiling, patience), see _auto_run
-        self._give_up_early = False  # interval = "auto", above interval_min: a diverging try is retried shorter at once
+        self._give_up_early = False  # interval = "auto", above interval_min: a hopeless try is retried shorter at once
         self.resume_point: ResumePoint | None = None  # at the last Commit (None: not a point to go on from)
 
     def _action(self, stage: int, times: np.ndarray, inputs: dict[str, dict[str, np.ndarray]]) -> Run:
@@ -746,7 +771,7 @@ class Relaxation:
                 result = self._check(flat, last_stage, history)
                 if result.converged:
                     return Interval(times, outputs, inputs, stage + 1, history)
-                if self._give_up_early and _diverging(history, result.failing):  # retried shorter: no use going on
+                if self._give_up_early and _hopeless(history, result.failing):  # retried shorter: no use going on
                     raise NotConverged(float(times[0]), float(times[-1]), stage + 1, result.failing, history)
                 back = _repeated(flat, seen) if stage >= CYCLE_FROM else 0
                 if back:
@@ -799,7 +824,7 @@ class Relaxation:
                 result = self._check(new, fed_back, history)
                 if result.converged:
                     return Interval(times, outputs, inputs, stage + 1, history)
-                if self._give_up_early and _diverging(history, result.failing):  # retried shorter: no use going on
+                if self._give_up_early and _hopeless(history, result.failing):  # retried shorter: no use going on
                     raise NotConverged(float(times[0]), float(times[-1]), stage + 1, result.failing, history)
                 back = _repeated(new, seen) if stage >= CYCLE_FROM else 0
                 if back:
