@@ -102,6 +102,8 @@ def test_run_says_what_it_cost_in_requests(tmp_path: Path) -> None:
     assert "10 intervals to t = 4 " in done.stdout and "(10 took 5 stages)" in done.stdout
     cost = "requests: 14.00 an interval, sent in 5.00 round trips (12.5 round trips per simulated second)"
     assert cost + "\n" in done.stdout  # in process: no round trip time (no transport to time)
+    # RF-C checks all 18 outputs: aero's force is the last of them to settle
+    assert "slowest to converge (failed the check before the last): aero.force in 10 intervals\n" in done.stdout
     remote = subprocess.run([*COSIM, "run", str(ROOT / "scenarios" / "oscillator.toml"), "--stop", "0.5", "--output",
                              str(tmp_path / "o.csv"), "--quiet"], capture_output=True, text=True, timeout=120)
     assert remote.returncode == 0, remote.stderr

@@ -392,3 +392,28 @@ def test_a_run_whose_stop_is_before_its_start_or_not_finite_is_refused(start: fl
     plan = Plan.build({"y": {"u": 1}}, {"y": {"y": 1}}, [Coupling.make("y.u", "y.y", "gain", {"k": -1.0})])
     with pytest.raises(ValueError, match="both finite, the stop not before the start"):
         Relaxation(plan, settings("centralized")).run(start, stop)
+
+
+def test_an_interval_names_the_signals_that_converged_last_and_the_summary_counts_them() -> None:
+    """Centralized: src.s is a given signal (the same at every stage), sink integrates it. Stage 0 runs the sink on
+    its zero first guess; stage 1 on src.s (src.s passes, sink.y fails); stage 2 changes nothing. So sink.y failed the
+    check before the last, src.s did not: the slowest is sink.y in every interval."""
+    plan = Plan.build({"src": {}, "sink": {"u": 1}}, {"src": {"s": 1}, "sink": {"y": 1}},
+                      [Coupling.make("sink.u", "src.s")], "centralized")
+
+    def answer(action: Run) -> dict:
+        t = action.times
+        replies = {"src": {"s": np.cos(t)[:, None]}}
+        if "sink" in action.inputs:
+            replies["sink"] = {"y": integrate_exactly(0.0, t, action.inputs["sink"]["u"][:, 0])[:, None]}
+        return {name: replies[name] for name in action.inputs}
+
+    steps = Relaxation(plan, settings("centralized", interval=0.5)).run(0.0, 1.0)
+    action, committed = steps.send(None), []
+    while not isinstance(action, Done):
+        if isinstance(action, Commit):
+            committed.append(action.interval)
+        action = steps.send(answer(action) if isinstance(action, Run) else None)
+    assert [i.stages for i in committed] == [3, 3]
+    assert [i.converged_last for i in committed] == [("sink.y",), ("sink.y",)]
+    assert action.summary.converged_last == {"sink.y": 2}

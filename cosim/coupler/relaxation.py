@@ -128,6 +128,7 @@ class Interval:
     halvings: int = 0  # times this interval was rolled back and retried shorter
     restarts: int = 0  # subsims the driver replaced during this interval
     error: float = 0.0  # interval = "auto": the error ratio (estimate / interval_tol; <= 1 accepted), else 0
+    converged_last: tuple[str, ...] = ()  # the checked signals that failed the check before the last: the slowest
 
     @property
     def length(self) -> float:
@@ -171,6 +172,7 @@ class RunSummary:
     unconverged: int = 0  # of the rejected tries: those that did not converge (or diverged), not over interval_tol
     rejected_stages: int = 0  # stages the rejected tries ran
     over_tol: int = 0  # interval = "auto": intervals accepted at interval_min above interval_tol
+    converged_last: Counter = field(default_factory=Counter)  # checked signal -> intervals it was the last to pass in
 
     def add(self, interval: Interval) -> None:
         self.t_end = float(interval.t[-1])
@@ -181,6 +183,7 @@ class RunSummary:
         self.wall_time += interval.wall_time
         self.shortest = min(self.shortest, interval.length)
         self.longest = max(self.longest, interval.length)
+        self.converged_last.update(interval.converged_last)
 
 
 class NotConverged(RuntimeError):
@@ -761,6 +764,7 @@ class Relaxation:
         seen: deque[dict[str, bytes]] = deque(maxlen=CYCLE_PERIOD)  # the checked outputs of the latest stages
         last_stage: dict[str, np.ndarray] | None = None  # the flat outputs of the stage before, for the check
         latest: Latest = {}
+        failing: tuple[str, ...] = ()  # the signals the latest check failed
         for stage in range(s.max_stages):
             runs = {name: self._inputs_of(name, inputs, n) for name in plan.names}
             outputs = yield from self._run_changed(stage, times, runs, latest)
@@ -770,7 +774,8 @@ class Relaxation:
             if last_stage is not None:
                 result = self._check(flat, last_stage, history)
                 if result.converged:
-                    return Interval(times, outputs, inputs, stage + 1, history)
+                    return Interval(times, outputs, inputs, stage + 1, history, converged_last=failing)
+                failing = tuple(result.failing)
                 if self._give_up_early and _hopeless(history, result.failing):  # retried shorter: no use going on
                     raise NotConverged(float(times[0]), float(times[-1]), stage + 1, result.failing, history)
                 back = _repeated(flat, seen) if stage >= CYCLE_FROM else 0
@@ -790,6 +795,7 @@ class Relaxation:
         last_stage: Outputs | None = None  # the outputs of the stage before (self._previous: of the interval before)
         self._tries += 1
         latest: Latest = {}
+        failing: tuple[str, ...] = ()  # the signals the latest check failed
         for stage in range(s.max_stages):
             inputs = dict(fed_back)
             outputs: Outputs = {}
@@ -823,7 +829,8 @@ class Relaxation:
             if stage > 0:
                 result = self._check(new, fed_back, history)
                 if result.converged:
-                    return Interval(times, outputs, inputs, stage + 1, history)
+                    return Interval(times, outputs, inputs, stage + 1, history, converged_last=failing)
+                failing = tuple(result.failing)
                 if self._give_up_early and _hopeless(history, result.failing):  # retried shorter: no use going on
                     raise NotConverged(float(times[0]), float(times[-1]), stage + 1, result.failing, history)
                 back = _repeated(new, seen) if stage >= CYCLE_FROM else 0
