@@ -280,7 +280,8 @@ def _describe(args: argparse.Namespace) -> int:
         print("couplings:")
         for c in scenario.couplings:
             extra = f" via {c.transform_name}" if c.transform_name != "identity" else ""
-            print(f"  {c}{extra}")
+            params = ", ".join(f"{k} = {v!r}" for k, v in c.params.items())  # (a gain's value, a lever arm)
+            print(f"  {c}{extra}{f' ({params})' if params else ''}")
         held = session.plans[scenario.default_method].held
         if held:
             print(f"held inputs: {'; '.join(f'{k} = {list(v)}' for k, v in held.items())}")

@@ -196,7 +196,7 @@ def test_describe_prints_order_and_feedback_edges() -> None:
     assert done.returncode == 0, done.stderr
     assert "order (derived): mass1 -> mass2" in done.stdout
     assert "feedback edges (1 scalar signals): mass2.u -> mass1.F" in done.stdout
-    assert "mass1.u -> mass2.F via gain" in done.stdout
+    assert "mass1.u -> mass2.F via gain (k = 157.91367041742973)" in done.stdout  # the file's gain, as written
     assert "concurrent groups" not in done.stdout  # mass2 reads mass1 in the same stage
 
 
