@@ -185,10 +185,12 @@ def _run_until_done(args: argparse.Namespace, state: dict) -> int:
             f"; a round trip took {_duration(s.round_trip_median)} (median), {_duration(s.round_trip_max)} at most"
         lines.append(f"requests: {s.requests / s.intervals:.2f} an interval, sent in "
                      f"{s.round_trips / s.intervals:.2f} round trips{per_second}{took}")
-    if s.converged_last:  # which coupled signals the iteration waits for: what a tighter coupling would speed up
+    if s.converged_last:  # which checked signals (outputs in RF-C, fed-back inputs in RF-D) the iteration waits for
         slowest = ", ".join(f"{name} in {count}" for name, count in s.converged_last.most_common(3))  # most first
         more = f" (and {len(s.converged_last) - 3} more signals)" if len(s.converged_last) > 3 else ""
-        lines.append(f"slowest to converge (failed the check before the last): {slowest} intervals{more}")
+        last = s.converged_last.most_common(3)[-1][1]
+        lines.append(f"slowest to converge (failed the check before the last): {slowest} "
+                     f"interval{'s' if last != 1 else ''}{more}")
     if s.rejected:  # tries rolled back and run again shorter: their cost is in the wall time, not the histogram
         why = (f"{s.unconverged} not converged, {s.rejected - s.unconverged} over interval_tol"
                if scenario.settings_for(report.method).auto is not None else "not converged: max_halvings")

@@ -311,8 +311,8 @@ class Runtime:
         self._watched_until: float | None = None  # the end of the latest run whose attributes were compared
         self._rerun_checked = True  # whether a run since the configure was repeated and gave the same bits
         self._input_layout = _InputLayout(None, ())
-        self._grid: tuple[np.ndarray, float, float] | None = None  # the latest request's checked times, first, last
-        self._grid_bytes: bytes | None = None  # ...and the bytes they were checked from
+        self._grid: tuple[np.ndarray, float, float] = (np.empty(0), 0.0, 0.0)  # the latest request's checked times,
+        self._grid_bytes: bytes | None = None  # first, last; and the bytes they were checked from (None: none yet)
         # told of every error the model caused (model_error, model_exception), e.g. to show it to the model's
         # owner at the subsim's own terminal as well as in the coordinator's reply
         self.on_model_error: Callable[[str, CosimError], None] | None = None

@@ -170,8 +170,8 @@ class _Weights(NamedTuple):
 
 def _apply(weights: _Weights, values: np.ndarray) -> np.ndarray:
     coef, den = weights.coef, weights.den
-    if weights.wide is not None:
-        m = values.shape[1]
+    m = values.shape[1]
+    if weights.wide is not None and 1 < m and coef.size * m <= WIDE_MAX:  # (one channel: coef is that shape already)
         wide = weights.wide.get(m)
         if wide is None:  # (two threads may both make them: equal arrays, either is right)
             wide = weights.wide[m] = (np.repeat(coef, m, axis=2), None if den is None else np.repeat(den, m, axis=1))
@@ -192,7 +192,8 @@ def _apply(weights: _Weights, values: np.ndarray) -> np.ndarray:
 # Every stage of an interval, and every subsim of a stage, interpolates on the same grid at the same times (the
 # integrators' RK times): the weights are computed once per (scheme, grid, times) and kept for the next calls.
 _KEPT_WEIGHTS: dict[bytes, _Weights] = {}
-KEPT_WEIGHTS_MAX = 32  # entries (each a few KB): memory stays flat however long the run
+KEPT_WEIGHTS_MAX = 32  # entries (a few KB each, and up to 32 KB per channel count repeated): memory stays flat
+WIDE_MAX = 4096  # values of coef repeated over the channels kept per entry and channel count (a few; larger: broadcast)
 _NO_ROWS = np.zeros(0, dtype=np.intp)
 
 

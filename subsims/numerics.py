@@ -70,6 +70,8 @@ def _grid(times: Sequence[float] | np.ndarray, steps: int | np.ndarray,
         counts = [int(steps)] * (len(t) - 1)
     else:
         counts = np.broadcast_to(np.asarray(steps, dtype=np.intp), (len(t) - 1,)).tolist()
+    if min(counts, default=0) < 0:  # (the array form refused them in np.repeat; a loop would skip them)
+        raise ValueError(f"steps per sample must be >= 0, got {min(counts)}")
     total = sum(counts)
     if total > MAX_STEPS:  # one request must not hold its process for minutes (or ask for gigabytes of times)
         raise PhysicsError(f"{total} RK4 steps asked for in one call ({len(t)} samples); at most {MAX_STEPS}: "

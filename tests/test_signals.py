@@ -359,7 +359,7 @@ def test_interpolants_on_one_grid_share_weights_never_values(scheme: str) -> Non
 @pytest.mark.parametrize("scheme", list(SCHEMES))
 def test_kept_weights_serve_values_of_any_width(scheme: str) -> None:
     """Kept weights keep their coefficients repeated per channel count: values of another width on the same grid
-    and times get their own, bit for bit what the scalar form gives."""
+    and times get their own, bit for bit what the scalar form gives. Past WIDE_MAX values they are not kept."""
     grid = np.linspace(3.0, 3.4, 6)
     ts = np.sort(np.concatenate([grid, 0.5 * (grid[1:] + grid[:-1])]))  # RK-like times, samples among them
     rng = np.random.default_rng(3)
@@ -369,7 +369,12 @@ def test_kept_weights_serve_values_of_any_width(scheme: str) -> None:
         got = interpolant(grid, v, scheme)(ts)
         assert got.tobytes() == np.array([interpolant(grid, v, scheme)(float(t)) for t in ts]).tobytes()
     (kept,) = signals._KEPT_WEIGHTS.values()
-    assert sorted(kept.wide) == [1, 3, 6]
+    assert sorted(kept.wide) == [3, 6]  # one channel: the coefficients have that shape already, no copy
+    many = signals.WIDE_MAX // kept.coef.size + 1  # channels past the bound: broadcast, the same bits
+    v = rng.normal(size=(grid.size, many))
+    got = interpolant(grid, v, scheme)(ts)
+    assert got.tobytes() == np.array([interpolant(grid, v, scheme)(float(t)) for t in ts]).tobytes()
+    assert sorted(kept.wide) == [3, 6]
 
 
 @pytest.mark.parametrize("shape", [(0,), (1,), (6,), (16,), (17,), (200,), (5, 3), (1, 1)])

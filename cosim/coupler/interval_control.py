@@ -33,8 +33,9 @@ The controller (what :class:`~cosim.coupler.relaxation.Relaxation` does with it)
 
 - ratio > 1: the interval is rolled back and retried with ``H * max(0.2, 0.8 ratio^(-1/q))``, where
   ``q = p + 1`` is the estimate's order in ``H`` (n fixed);
-- not converged in ``max_stages``, or diverging (a residual grown past 100 times its first ones), or a run
-  overflowed on the iterates: rolled back and retried on half the length; for the next 16 intervals the
+- not converged in ``max_stages``, or diverging (a residual grown past 100 times its first ones), or stalled
+  (a signal's residuals neither falling nor growing over 16 stages without a pass), or a run overflowed on the
+  iterates: rolled back and retried on half the length; for the next 16 intervals the
   length then stays below 3/4 of the failed one (no growing straight back into it);
 - accepted: the next interval is ``H`` times the smaller of the error factor (at most 2) and a stage
   factor: 2 while intervals converge in fewer than ``interval_stages`` stages, 1 at that many, and

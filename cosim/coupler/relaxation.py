@@ -169,7 +169,7 @@ class RunSummary:
     requests: int = 0  # subsim runs, rejected tries included
     round_trip_median: float | None = None  # s from a Run's requests to its last reply (recent ones; by the driver)
     round_trip_max: float | None = None  # s, the longest of them (a subsim that stalled, not a slow link)
-    unconverged: int = 0  # of the rejected tries: those that did not converge (or diverged), not over interval_tol
+    unconverged: int = 0  # of the rejected tries: not converged (diverged, stalled), not over interval_tol
     rejected_stages: int = 0  # stages the rejected tries ran
     over_tol: int = 0  # interval = "auto": intervals accepted at interval_min above interval_tol
     converged_last: Counter = field(default_factory=Counter)  # checked signal -> intervals it was the last to pass in
@@ -366,29 +366,42 @@ def _diverging(history: Mapping[str, list[float]], failing: Sequence[str]) -> bo
     return False
 
 
-STALL_WINDOW = 4  # stages a window; interval = "auto": four windows in a row neither falling nor growing give up
+STALL_WINDOW = 4  # stages a window; interval = "auto": four windows without a trend, none passed, give up
 
 
-def _stalled(history: Mapping[str, list[float]], failing: Sequence[str]) -> bool:
-    """Whether a failing signal's residuals have neither fallen nor grown over the last four windows of
-    ``STALL_WINDOW`` stages (each one's maximum within 0.7-1.2 times the one before, as :func:`_trend`): an iteration
-    bouncing between the limits of a saturation, or around a switch, never bit-equal, that more stages would not
-    settle (it ran every one of ``max_stages`` before the try was retried shorter). An iteration converging at less
-    than about 0.91 a stage falls faster than that; a slower one would not reach its tolerance in ``max_stages``."""
+def _stalled(history: Mapping[str, list[float]], failing: Sequence[str], unsettled: Mapping[str, int]) -> bool:
+    """Whether a failing signal that has not passed by being small in the last four windows of ``STALL_WINDOW``
+    checks (``unsettled``: it failed each, or did not move at all, as a Jacobi pair's signals every other stage) has
+    residuals that neither fall nor grow: each window's maximum within 0.7-1.2 times the one before (as
+    :func:`_trend`), and the latest within 10 % of the first's, twelve stages before. An iteration bouncing between
+    the limits of a saturation, or around a switch, never bit-equal: more stages would not settle it (it ran all
+    ``max_stages`` before the try was retried shorter). A signal passing now and then (noise at its tolerance) is not
+    judged, nor one contracting by 1 % a stage or more (it fell by over 10 % in those stages). One contracting slower
+    that was within about 2.5 times its tolerance would have passed in 100 more stages: it is retried shorter, as
+    accurate, at more cost."""
     w = STALL_WINDOW
     for name in failing:
         r = history.get(name, ())
-        if len(r) < 4 * w:
+        if unsettled.get(name, 0) < 4 * w or len(r) < 4 * w:
             continue
         m = [max(r[len(r) - (j + 1) * w:len(r) - j * w]) for j in range(4)]  # latest window first
-        if all(0.7 * m[j + 1] <= m[j] <= 1.2 * m[j + 1] for j in range(3)):
+        if all(0.7 * m[j + 1] <= m[j] <= 1.2 * m[j + 1] for j in range(3)) and 0.9 * m[3] <= m[0] <= 1.1 * m[3]:
             return True
     return False
 
 
-def _hopeless(history: Mapping[str, list[float]], failing: Sequence[str]) -> bool:
-    """Whether more stages of this try would not converge: it diverges, or it has stalled."""
-    return _diverging(history, failing) or _stalled(history, failing)
+def _hopeless(history: Mapping[str, list[float]], failing: Sequence[str], unsettled: Mapping[str, int]) -> bool:
+    """Whether more stages of this try would not converge: it diverges, or it has stalled (``unsettled``: as
+    :func:`_count_unsettled` keeps it)."""
+    return _diverging(history, failing) or _stalled(history, failing, unsettled)
+
+
+def _count_unsettled(unsettled: dict[str, int], largest: Mapping[str, float], failing: Sequence[str]) -> None:
+    """Update, with one check, each checked signal's count of checks in a row it failed or did not move in (residual
+    0); ``largest``: the check's largest residual per signal. One that passed with a residual goes back to 0."""
+    now = set(failing)
+    for name, residual in largest.items():
+        unsettled[name] = unsettled.get(name, 0) + 1 if name in now or residual == 0.0 else 0
 
 
 class RetryInterval(Exception):
@@ -572,6 +585,7 @@ class Relaxation:
 
     def _interval(self, t0: float, t1: float) -> Generator[Action, Outputs | None, Interval]:
         s = self.settings
+        self._give_up_early = False  # a given length: every try runs to max_stages (an auto run before set it)
         for halvings in range(s.max_halvings + 1):
             times = sample_times(t0, t0 + (t1 - t0) / 2**halvings, s.samples)
             try:
@@ -765,6 +779,7 @@ class Relaxation:
         last_stage: dict[str, np.ndarray] | None = None  # the flat outputs of the stage before, for the check
         latest: Latest = {}
         failing: tuple[str, ...] = ()  # the signals the latest check failed
+        unsettled: dict[str, int] = {}  # (see _count_unsettled)
         for stage in range(s.max_stages):
             runs = {name: self._inputs_of(name, inputs, n) for name in plan.names}
             outputs = yield from self._run_changed(stage, times, runs, latest)
@@ -776,7 +791,8 @@ class Relaxation:
                 if result.converged:
                     return Interval(times, outputs, inputs, stage + 1, history, converged_last=failing)
                 failing = tuple(result.failing)
-                if self._give_up_early and _hopeless(history, result.failing):  # retried shorter: no use going on
+                _count_unsettled(unsettled, result.largest_each, failing)
+                if self._give_up_early and _hopeless(history, failing, unsettled):  # retried shorter: no use going on
                     raise NotConverged(float(times[0]), float(times[-1]), stage + 1, result.failing, history)
                 back = _repeated(flat, seen) if stage >= CYCLE_FROM else 0
                 if back:
@@ -796,6 +812,7 @@ class Relaxation:
         self._tries += 1
         latest: Latest = {}
         failing: tuple[str, ...] = ()  # the signals the latest check failed
+        unsettled: dict[str, int] = {}  # (see _count_unsettled)
         for stage in range(s.max_stages):
             inputs = dict(fed_back)
             outputs: Outputs = {}
@@ -831,7 +848,8 @@ class Relaxation:
                 if result.converged:
                     return Interval(times, outputs, inputs, stage + 1, history, converged_last=failing)
                 failing = tuple(result.failing)
-                if self._give_up_early and _hopeless(history, result.failing):  # retried shorter: no use going on
+                _count_unsettled(unsettled, result.largest_each, failing)
+                if self._give_up_early and _hopeless(history, failing, unsettled):  # retried shorter: no use going on
                     raise NotConverged(float(times[0]), float(times[-1]), stage + 1, result.failing, history)
                 back = _repeated(new, seen) if stage >= CYCLE_FROM else 0
                 if back:
